@@ -1,0 +1,1 @@
+"""Estimators: build matrices / estimate from matrices (never from vehicles)."""

@@ -1,0 +1,184 @@
+"""The contract every chapter's experiment module follows.
+
+A chapter module defines::
+
+    SPEC = ChapterSpec(
+        name="reduced-order-observer",
+        title="...",
+        paper="001_b49ad810fb7b323c.txt",
+        notebook="reduced_order_observer.ipynb",   # in book/notebooks/
+        parameters=[Parameter("speeds_kmh", [60, 100], "list[float]", "simulated speeds, km/h",
+                              quick=None, positive=True), ...],
+    )
+
+    def run(*, quick=False, progress=None, **parameters) -> ChapterResult: ...
+
+``quick`` selects the chapter's stated quick sizes; every metric key, time-series column and
+figure of a full run also exists in a quick run.  ``progress`` is an optional callable
+``progress(fraction: float, message: str)`` for long runs.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+TYPE_NAMES = ("int", "float", "bool", "str", "list[float]", "list[int]")
+
+
+class ParameterError(ValueError):
+    """A chapter parameter is unknown, of the wrong type or non-physical (one-line message)."""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One chapter parameter.
+
+    Attributes
+    ----------
+    name : str
+        Python identifier with its unit in the name (``speed_kmh``, ``duration_s``).
+    default : Any
+        Default of a full run.
+    type : str
+        One of ``TYPE_NAMES``.
+    meaning : str
+        One sentence for ``railpaper list`` and the chapter's parameter table.
+    quick : Any, optional
+        Value used by ``--quick`` when the user did not set the parameter (None: same as default).
+    positive : bool
+        Numbers (or every list element) must be > 0.
+    minimum : float, optional
+        Numbers (or every list element) must be >= minimum.
+    """
+
+    name: str
+    default: Any
+    type: str
+    meaning: str
+    quick: Any = None
+    positive: bool = False
+    minimum: float | None = None
+
+    def coerce(self, value: Any) -> Any:
+        """Check and convert a user value; raise :class:`ParameterError` with one line."""
+        def number(v, kind):
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ParameterError(
+                    f"parameter '{self.name}' expects {self.type}, got {type(v).__name__} {v!r}")
+            if kind == "int":
+                if isinstance(v, float) and not v.is_integer():
+                    raise ParameterError(f"parameter '{self.name}' expects an integer, got {v!r}")
+                v = int(v)
+            else:
+                v = float(v)
+            if not math.isfinite(v):
+                raise ParameterError(f"parameter '{self.name}' must be finite, got {v!r}")
+            if self.positive and v <= 0:
+                raise ParameterError(f"parameter '{self.name}' must be > 0, got {v!r}")
+            if self.minimum is not None and v < self.minimum:
+                raise ParameterError(f"parameter '{self.name}' must be >= {self.minimum}, got {v!r}")
+            return v
+
+        if self.type in ("int", "float"):
+            return number(value, self.type)
+        if self.type == "bool":
+            if not isinstance(value, bool):
+                raise ParameterError(f"parameter '{self.name}' expects true or false, got {value!r}")
+            return value
+        if self.type == "str":
+            if not isinstance(value, str):
+                raise ParameterError(f"parameter '{self.name}' expects a string, got {value!r}")
+            return value
+        if self.type in ("list[float]", "list[int]"):
+            if not isinstance(value, (list, tuple)) or len(value) == 0:
+                raise ParameterError(
+                    f"parameter '{self.name}' expects a non-empty list like [60, 100], got {value!r}")
+            return [number(v, self.type[5:-1]) for v in value]
+        raise AssertionError(self.type)
+
+
+@dataclass(frozen=True)
+class ChapterSpec:
+    """What the pipeline needs to know about a chapter."""
+
+    name: str
+    title: str
+    paper: str
+    notebook: str
+    parameters: list[Parameter]
+    quick_sizes: str = ""
+
+    def parameter(self, name: str) -> Parameter:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        close = difflib.get_close_matches(name, [p.name for p in self.parameters], n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ParameterError(f"chapter '{self.name}' has no parameter '{name}'{hint}")
+
+    def resolve(self, overrides: dict[str, Any], quick: bool = False) -> dict[str, Any]:
+        """Full parameter dict: defaults (quick values when ``quick``) updated by checked overrides."""
+        values = {}
+        for p in self.parameters:
+            values[p.name] = p.quick if (quick and p.quick is not None) else p.default
+        for name, value in overrides.items():
+            values[name] = self.parameter(name).coerce(value)
+        return values
+
+    def defaults(self) -> dict[str, Any]:
+        return {p.name: p.default for p in self.parameters}
+
+
+@dataclass
+class ChapterResult:
+    """What a chapter's ``run`` returns.
+
+    Attributes
+    ----------
+    metrics : dict
+        Deterministic numbers/booleans (no NaN: "never happened" is -1).
+    timings : dict
+        Wall-clock figures (not deterministic).
+    timeseries : pandas.DataFrame
+        First column ``t_s`` (or ``step`` where the chapter says so), units in column names.
+    extra_tables : dict of str to DataFrame
+        Other CSV outputs (e.g. ``toy_timeseries``), written as ``<key>.csv``.
+    data : dict
+        Anything else the notebook plots (arrays, tables).
+    """
+
+    metrics: dict[str, float | int | bool]
+    timings: dict[str, float] = field(default_factory=dict)
+    timeseries: pd.DataFrame | None = None
+    extra_tables: dict[str, pd.DataFrame] = field(default_factory=dict)
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+def check_metrics(metrics: dict[str, Any]) -> dict[str, float | int | bool]:
+    """Validate metric values: numbers or booleans, finite; numpy scalars become Python ones."""
+    clean = {}
+    for key, value in metrics.items():
+        if isinstance(value, (bool, np.bool_)):
+            clean[key] = bool(value)
+            continue
+        if isinstance(value, (int, np.integer)):
+            clean[key] = int(value)
+            continue
+        value = float(value)
+        if not math.isfinite(value):
+            raise ValueError(f"metric '{key}' is {value}; use -1 for 'never happened'")
+        clean[key] = value
+    return clean
+
+
+ProgressCallback = Callable[[float, str], None]
+
+
+def no_progress(fraction: float, message: str) -> None:  # noqa: ARG001 - callback signature
+    """Default progress callback: silent."""

@@ -1,0 +1,1 @@
+"""Models: build matrices / estimate from matrices (never from vehicles)."""
