@@ -1,0 +1,1 @@
+"""Pipeline: papermill runs, outputs, tolerances, book build."""
