@@ -1,0 +1,156 @@
+"""The ``railpaper`` command: list, run, check, build, track.
+
+Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
+no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import yaml
+
+EXIT_USER_ERROR = 2
+
+
+def _parse_value(text: str):
+    """A ``-p NAME VALUE`` value, parsed as YAML (so ``'[80, 140]'`` is a list)."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def cmd_list(args) -> int:
+    from railpaper.experiments import available_chapters, load_chapter
+    for name in available_chapters():
+        spec = load_chapter(name).SPEC
+        print(f"{name}: {spec.title}  [paper {spec.paper}]")
+        if spec.quick_sizes:
+            print(f"  --quick: {spec.quick_sizes}")
+        for p in spec.parameters:
+            quick = "" if p.quick is None else f" (quick: {p.quick!r})"
+            print(f"  {p.name} = {p.default!r}{quick}  [{p.type}]  {p.meaning}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from railpaper.pipeline.chapters import chapter_spec, run_chapter
+    overrides = {}
+    spec = chapter_spec(args.chapter)
+    for name, value in args.parameter or []:
+        spec.parameter(name)                                  # unknown name: one line, exit 2
+        overrides[name] = _parse_value(value)
+    spec.resolve(overrides, args.quick)                       # wrong type / value: before a kernel
+    out = run_chapter(args.chapter, overrides, args.quick, args.out)
+    print(f"railpaper: chapter {args.chapter} written to {out}")
+    return 0
+
+
+def cmd_check(args) -> int:
+    from railpaper.experiments import available_chapters
+    from railpaper.pipeline.chapters import chapter_spec
+    from railpaper.pipeline.check import check_chapter, format_rows
+    chapters = args.chapters or available_chapters()
+    rows = []
+    for name in chapters:
+        chapter_spec(name)
+        rows += check_chapter(name, args.out if len(chapters) == 1 else None)
+    print(format_rows(rows))
+    failed = [r for r in rows if r.status.startswith("FAIL")]
+    if failed:
+        print(f"railpaper: {len(failed)} metric(s) out of tolerance", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_build(args) -> int:
+    from railpaper.pipeline.book import build_book
+    html = build_book(args.quick, args.book_dir)
+    print(f"railpaper: book built at {html / 'index.html'}")
+    return 0
+
+
+def cmd_track(args) -> int:
+    from railpaper import track
+    if args.list:
+        for name, description, components in track.list_spectra():
+            print(f"{name:12s} {description}  components: {', '.join(components)}")
+        return 0
+    if not args.spectrum or not args.output:
+        raise ValueError("track needs --spectrum and -o FILE (or --list)")
+    distance, profile = track.synthesize_profile(
+        args.spectrum, args.component, args.length_m, args.dx_m, args.seed,
+        wavelength_min_m=args.wavelength_min_m, wavelength_max_m=args.wavelength_max_m,
+        method=args.method)
+    frame = track.profile_frame(distance, profile)
+    output = Path(args.output)
+    tmp = output.with_name(f".{output.name}.tmp")
+    frame.to_csv(tmp, index=False, float_format="%.17g")
+    tmp.replace(output)
+    print(f"railpaper: {len(frame)} samples of {args.spectrum} {args.component} written to {output}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="railpaper", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("list", help="chapters with their parameters, defaults and meaning")
+    p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("run", help="execute one chapter notebook with papermill")
+    p.add_argument("chapter")
+    p.add_argument("-p", "--parameter", nargs=2, action="append", metavar=("NAME", "VALUE"),
+                   help="set a chapter parameter; VALUE is YAML (e.g. -p speeds_kmh '[80, 140]')")
+    p.add_argument("--quick", action="store_true", help="the chapter's quick sizes (CI)")
+    p.add_argument("--out", type=Path, help="output directory (default: the book's chapter folder)")
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("check", help="metrics.json against the CI tolerances")
+    p.add_argument("chapters", nargs="*")
+    p.add_argument("--out", type=Path, help="run directory to check (one chapter only)")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("build", help="run every chapter, then build the book strictly")
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--book-dir", type=Path, help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("track", help="export a synthetic track irregularity profile as CSV")
+    p.add_argument("--list", action="store_true", help="name the spectra and components")
+    p.add_argument("--spectrum")
+    p.add_argument("--component", default="vertical")
+    p.add_argument("--length-m", type=float, default=2000.0)
+    p.add_argument("--dx-m", type=float, default=0.25)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--wavelength-min-m", type=float)
+    p.add_argument("--wavelength-max-m", type=float)
+    p.add_argument("--method", choices=("harmonic", "ifft"), default="ifft")
+    p.add_argument("-o", "--output")
+    p.set_defaults(func=cmd_track)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status."""
+    from railpaper.data import DataError
+    from railpaper.experiments.base import ParameterError
+    from railpaper.pipeline.chapters import PipelineError
+
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (ParameterError, DataError, PipelineError, ValueError, OSError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"railpaper: error: {message}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("railpaper: interrupted; previous outputs left untouched", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

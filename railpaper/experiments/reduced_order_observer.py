@@ -1,0 +1,193 @@
+"""Chapter ``reduced-order-observer`` (paper 001): wheel–rail force from a reduced-order observer.
+
+The whole computation of the chapter as a function of its parameters: simulate the single-wheelset
+vehicle on a US FRA class-5 vertical profile, observe ``[ż_w, z_w]`` from the measured body
+signals ``[ż_c, z_c]`` and the known irregularity ``q`` with the Gopinath observer of Eq. (12),
+and turn the estimate into the wheel–rail force with the linearised Hertz stiffness (Eq. 4).
+
+Definitions used for the metrics
+--------------------------------
+* convergence time: the first time after which ``|ẑ_w − z_w|`` stays below
+  ``convergence_fraction`` (5 %) of the RMS of the true ``z_w`` to the end of the run;
+* force RMS error: RMS of ``f̂ − f`` over ``t ≥ error_window_start_s`` (after the transient).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from railpaper import track
+from railpaper.discretise import foh, simulate_foh
+from railpaper.estimators import reduced_order_observer as roo
+from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
+from railpaper.models import single_wheelset as sw
+
+SPEC = ChapterSpec(
+    name="reduced-order-observer",
+    title="Reduced-order observer of wheel–rail force (paper 001)",
+    paper="001_b49ad810fb7b323c.txt",
+    notebook="reduced_order_observer.ipynb",
+    quick_sizes="1 s simulated instead of 2 s; trend sweep over 4 speeds instead of 9",
+    parameters=[
+        Parameter("speeds_kmh", [60.0, 100.0], "list[float]",
+                  "speeds of the main runs (figures, time series, metrics), km/h", positive=True),
+        Parameter("sweep_speeds_kmh", [40.0, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0],
+                  "list[float]", "speeds of the trend figures, km/h",
+                  quick=[40.0, 100.0, 160.0, 200.0], positive=True),
+        Parameter("duration_s", 2.0, "float", "simulated time per run, s", quick=1.0, positive=True),
+        Parameter("dt_s", 1e-4, "float", "time step of plant samples and observer, s (paper: 1e-4)",
+                  positive=True),
+        Parameter("observer_poles", [-30.0, -40.0], "list[float]",
+                  "poles of the observer error dynamics A22 − L·A12, 1/s (real, negative)"),
+        Parameter("plant", "linear", "str",
+                  "plant that generates the truth: 'linear' (paper) or 'hertz' (nonlinear contact)"),
+        Parameter("noise_fraction", 0.01, "float",
+                  "sensor noise σ as a fraction of each measured channel's RMS (paper's D = 0.01)",
+                  minimum=0.0),
+        Parameter("track_noise_fraction", 0.0, "float",
+                  "noise σ on the irregularity q given to the observer, fraction of its RMS",
+                  minimum=0.0),
+        Parameter("initial_error_m", 0.005, "float",
+                  "initial error of the observer's wheelset displacement, m"),
+        Parameter("track_class", 5, "int", "US FRA track class (1-6) of the vertical profile",
+                  minimum=1),
+        Parameter("convergence_fraction", 0.05, "float",
+                  "convergence threshold as a fraction of the RMS of the true z_w", positive=True),
+        Parameter("error_window_start_s", 0.5, "float",
+                  "force errors are measured from this time to the end of the run, s", minimum=0.0),
+        Parameter("seed", 0, "int", "seed of the track profile and the sensor noise", minimum=0),
+    ],
+)
+
+#: Shortest and longest wavelengths of the FRA spectrum's validity range, m.
+FRA_BAND_M = (1.524, 304.8)
+
+
+def _validate(params: dict) -> None:
+    if params["plant"] not in ("linear", "hertz"):
+        raise ParameterError(f"parameter 'plant' must be 'linear' or 'hertz', got {params['plant']!r}")
+    if not 1 <= params["track_class"] <= 6:
+        raise ParameterError(f"parameter 'track_class' must be 1..6, got {params['track_class']}")
+    if len(params["observer_poles"]) != 2 or max(params["observer_poles"]) >= 0:
+        raise ParameterError("parameter 'observer_poles' needs two negative numbers, e.g. [-30, -40]")
+    if params["dt_s"] > 5e-4:
+        raise ParameterError(
+            f"parameter 'dt_s' = {params['dt_s']} s is too coarse for the 243 Hz wheelset mode "
+            "(use ≤ 5e-4 s)")
+    if params["error_window_start_s"] >= params["duration_s"]:
+        raise ParameterError("parameter 'error_window_start_s' must be shorter than 'duration_s'")
+
+
+def convergence_time_s(t_s: np.ndarray, error: np.ndarray, threshold: float) -> float:
+    """First time after which ``|error| < threshold`` to the end; -1 if never."""
+    outside = np.flatnonzero(np.abs(error) >= threshold)
+    if len(outside) == 0:
+        return float(t_s[0])
+    if outside[-1] == len(error) - 1:
+        return -1.0
+    return float(t_s[outside[-1] + 1])
+
+
+def _simulate_hertz(vehicle, t_s, q_m, x0, substeps=4):
+    """RK4 with ``substeps`` per sample and q interpolated linearly (nonlinear Hertz plant)."""
+    dt = (t_s[1] - t_s[0]) / substeps
+    x = np.empty((len(t_s), 4))
+    x[0] = x0
+    state = np.array(x0, float)
+    f = lambda s, q: sw.nonlinear_derivative(vehicle, s, q)  # noqa: E731
+    for k in range(len(t_s) - 1):
+        q0, q1 = q_m[k], q_m[k + 1]
+        for j in range(substeps):
+            qa, qm, qb = (q0 + (q1 - q0) * (j + c) / substeps for c in (0.0, 0.5, 1.0))
+            k1 = f(state, qa)
+            k2 = f(state + 0.5 * dt * k1, qm)
+            k3 = f(state + 0.5 * dt * k2, qm)
+            k4 = f(state + dt * k3, qb)
+            state = state + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x[k + 1] = state
+    return x
+
+
+def simulate_speed(vehicle, observer, params, distance_m, profile_m, speed_kmh, rng) -> dict:
+    """One run at one speed: truth, measurements, observer estimate, forces (SI units)."""
+    dt, duration = params["dt_s"], params["duration_s"]
+    t_s, q = track.wheelset_inputs(distance_m, profile_m, speed_kmh / 3.6, [0.0], dt, duration)
+    q = q[:, 0]
+    A, B = sw.state_space(vehicle)
+    x0 = np.array([0.0, q[0], 0.0, q[0]])                 # static equilibrium on q(0)
+    if params["plant"] == "linear":
+        x = simulate_foh(*foh(A, B, dt), q[:, None], x0)   # exact for q linear between samples
+    else:
+        x = _simulate_hertz(vehicle, t_s, q, x0)
+    y = x[:, :2].copy()                                    # measured x1 = [ż_c, z_c]
+    y += rng.standard_normal(y.shape) * params["noise_fraction"] * np.sqrt(np.mean(y**2, axis=0))
+    q_meas = q + rng.standard_normal(q.shape) * params["track_noise_fraction"] * np.sqrt(np.mean(q**2))
+    x2_initial = x[0, 2:] + np.array([0.0, params["initial_error_m"]])
+    x2_hat = observer.run(y, q_meas[:, None], x2_initial)
+    force_true = sw.dynamic_contact_force_N(vehicle, x[:, 3], q, params["plant"])
+    force_est = sw.dynamic_contact_force_N(vehicle, x2_hat[:, 1], q_meas, "linear")
+    error = x2_hat[:, 1] - x[:, 3]
+    threshold = params["convergence_fraction"] * np.sqrt(np.mean(x[:, 3] ** 2))
+    window = t_s >= params["error_window_start_s"]
+    return {
+        "t_s": t_s, "q_m": q, "z_w_true_m": x[:, 3], "z_w_est_m": x2_hat[:, 1],
+        "force_true_N": force_true, "force_est_N": force_est,
+        "convergence_time_s": convergence_time_s(t_s, error, threshold),
+        "force_rms_error_N": float(np.sqrt(np.mean((force_est - force_true)[window] ** 2))),
+        "force_rms_N": float(np.sqrt(np.mean(force_true[window] ** 2))),
+        "displacement_rms_error_m": float(np.sqrt(np.mean(error[window] ** 2))),
+        "contact_lost_fraction": float(np.mean(force_true <= -2 * vehicle.static_wheel_load_N)),
+    }
+
+
+def _label(speed_kmh: float) -> str:
+    return f"{speed_kmh:g}kmh"
+
+
+def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
+    """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`."""
+    _validate(params)
+    progress = progress or (lambda fraction, message: None)
+    started = time.perf_counter()
+    vehicle = sw.load_parameters()
+    A, B = sw.state_space(vehicle)
+    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"])
+    spectrum = f"fra-{params['track_class']}"
+    all_speeds = list(dict.fromkeys(params["speeds_kmh"] + params["sweep_speeds_kmh"]))
+    length_m = max(max(all_speeds) / 3.6 * params["duration_s"] + 10.0, 2 * FRA_BAND_M[1])
+    distance_m, profile_m = track.synthesize_profile(
+        spectrum, "vertical", length_m, 0.05, params["seed"],
+        wavelength_min_m=FRA_BAND_M[0], wavelength_max_m=FRA_BAND_M[1])
+    runs = {}
+    for i, speed in enumerate(all_speeds):
+        progress(i / len(all_speeds), f"{speed:g} km/h")
+        rng = np.random.default_rng([params["seed"], int(round(speed * 1000))])
+        runs[speed] = simulate_speed(vehicle, observer, params, distance_m, profile_m, speed, rng)
+    progress(1.0, "done")
+
+    metrics, columns = {}, {"t_s": runs[params["speeds_kmh"][0]]["t_s"]}
+    for speed in params["speeds_kmh"]:
+        r, lab = runs[speed], _label(speed)
+        metrics[f"convergence_time_s_{lab}"] = r["convergence_time_s"]
+        metrics[f"force_rms_error_N_{lab}"] = r["force_rms_error_N"]
+        metrics[f"force_relative_rms_error_{lab}"] = r["force_rms_error_N"] / r["force_rms_N"]
+        metrics[f"displacement_rms_error_m_{lab}"] = r["displacement_rms_error_m"]
+        columns[f"wheelset_displacement_true_m_{lab}"] = r["z_w_true_m"]
+        columns[f"wheelset_displacement_est_m_{lab}"] = r["z_w_est_m"]
+        columns[f"wheel_rail_force_true_N_{lab}"] = r["force_true_N"]
+        columns[f"wheel_rail_force_est_N_{lab}"] = r["force_est_N"]
+    sweep = pd.DataFrame([{
+        "speed_kmh": s, "convergence_time_s": runs[s]["convergence_time_s"],
+        "force_rms_error_N": runs[s]["force_rms_error_N"], "force_rms_N": runs[s]["force_rms_N"],
+        "displacement_rms_error_m": runs[s]["displacement_rms_error_m"],
+        "contact_lost_fraction": runs[s]["contact_lost_fraction"],
+    } for s in params["sweep_speeds_kmh"]])
+    error_poles = np.linalg.eigvals(roo.design(A, B, 2, params["observer_poles"]).F)
+    data = {"runs": runs, "sweep": sweep, "vehicle": vehicle, "A": A, "B": B,
+            "observer_gain": observer.L, "error_poles": error_poles}
+    return ChapterResult(metrics=metrics, timings={"run_s": time.perf_counter() - started},
+                         timeseries=pd.DataFrame(columns), extra_tables={"speed_sweep": sweep},
+                         data=data)

@@ -1,0 +1,125 @@
+"""Executing chapter notebooks with papermill into an output directory, atomically."""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+
+from railpaper.experiments import CHAPTER_MODULES, available_chapters, load_chapter
+from railpaper.experiments.base import ChapterSpec, ParameterError
+
+REPO_DIR = Path(__file__).resolve().parents[2]
+BOOK_DIR = REPO_DIR / "book"
+NOTEBOOK_DIR = BOOK_DIR / "notebooks"
+KERNEL_NAME = "railpaper-venv"
+
+
+class PipelineError(RuntimeError):
+    """A pipeline step failed; the message is one line."""
+
+
+def chapter_spec(name: str) -> ChapterSpec:
+    """The :class:`ChapterSpec` of a chapter, or a one-line error naming the known chapters."""
+    if name not in CHAPTER_MODULES or name not in available_chapters():
+        import difflib
+        known = available_chapters()
+        close = difflib.get_close_matches(name, known, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ParameterError(f"unknown chapter '{name}'{hint}; chapters: {', '.join(known)}")
+    return load_chapter(name).SPEC
+
+
+def default_output_dir(name: str) -> Path:
+    """Where the book takes a chapter's executed notebook and outputs from."""
+    return BOOK_DIR / "chapters" / name
+
+
+def ensure_kernel() -> str:
+    """Register a kernel of *this* interpreter and put it first on JUPYTER_PATH.
+
+    Chapter notebooks then execute on the interpreter that runs the pipeline (the project's
+    ``.venv``), whatever kernels the user has registered elsewhere.
+    """
+    root = Path(sys.prefix) / "share" / "jupyter"
+    spec_dir = root / "kernels" / KERNEL_NAME
+    spec = {"argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
+            "display_name": "railpaper (.venv)", "language": "python"}
+    spec_file = spec_dir / "kernel.json"
+    if not spec_file.exists() or json.loads(spec_file.read_text()) != spec:
+        spec_dir.mkdir(parents=True, exist_ok=True)
+        spec_file.write_text(json.dumps(spec, indent=1))
+    paths = [str(root)] + [p for p in os.environ.get("JUPYTER_PATH", "").split(os.pathsep) if p]
+    os.environ["JUPYTER_PATH"] = os.pathsep.join(dict.fromkeys(paths))
+    return KERNEL_NAME
+
+
+@contextmanager
+def chapter_lock(out_dir: Path):
+    """Exclusive lock per output directory: two runs of the same chapter at once are refused."""
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    lock_path = out_dir.parent / f".{out_dir.name}.lock"
+    with open(lock_path, "w") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise PipelineError(f"another run is writing {out_dir}; wait for it to finish") from None
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
+                out_dir: str | Path | None = None, progress: bool = True) -> Path:
+    """Execute a chapter notebook with papermill; outputs land in ``out_dir`` only on success.
+
+    Parameters are checked before any kernel starts.  The notebook runs in a staging directory
+    beside ``out_dir``; on success the staging directory replaces ``out_dir``, on failure
+    (error, interrupt) it is removed and the previous good outputs stay untouched.
+
+    Returns
+    -------
+    Path
+        The output directory (holding the executed notebook, metrics.json, timings.json, CSV
+        files and PNG figures).
+    """
+    import papermill
+
+    spec = chapter_spec(name)
+    params = spec.resolve(overrides or {}, quick)
+    out = Path(out_dir) if out_dir else default_output_dir(name)
+    out = out.resolve()
+    source = NOTEBOOK_DIR / spec.notebook
+    if not source.exists():
+        raise PipelineError(f"notebook {source} is missing")
+    kernel = ensure_kernel()
+    with chapter_lock(out):
+        staging = out.parent / f".{out.name}.staging-{os.getpid()}"
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir(parents=True)
+        try:
+            papermill.execute_notebook(
+                str(source), str(staging / spec.notebook),
+                parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
+                kernel_name=kernel, cwd=str(staging), progress_bar=progress,
+                request_save_on_cell_execute=False)
+            if not (staging / "metrics.json").exists():
+                raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
+        except BaseException as exc:
+            shutil.rmtree(staging, ignore_errors=True)
+            if isinstance(exc, papermill.PapermillExecutionError):
+                raise PipelineError(
+                    f"chapter '{name}' failed in cell {exc.exec_count}: {exc.ename}: "
+                    f"{exc.evalue}".splitlines()[0]) from None
+            raise
+        previous = out.parent / f".{out.name}.previous-{os.getpid()}"
+        if out.exists():
+            out.rename(previous)
+        staging.rename(out)
+        shutil.rmtree(previous, ignore_errors=True)
+    return out

@@ -1,0 +1,102 @@
+"""Checking a run's metrics.json against the chapter's CI tolerances (data/<chapter>/tolerances.toml).
+
+Tolerance file::
+
+    [meta]
+    parameters = "defaults"
+    [full.convergence_time_s_60kmh]
+    min = 0.05
+    max = 0.25
+    source = "seeds 0-9: 0.09-0.16 s, band widened by 50 %"
+    [quick.convergence_time_s_60kmh]
+    ...
+
+A metric outside its band fails the check; an unreproduced paper claim never does (claims are
+shown beside the metrics for information).  A run whose parameters differ from the defaults the
+tolerances were set for is "not comparable".
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from railpaper.data import DataError, read_toml
+from railpaper.pipeline.chapters import chapter_spec, default_output_dir
+from railpaper.pipeline.outputs import chapter_data_dir, claims
+
+
+@dataclass
+class CheckRow:
+    chapter: str
+    metric: str
+    value: object
+    band: str
+    status: str
+    claim: str = ""
+
+
+def load_tolerances(chapter: str) -> dict:
+    """Tolerance bands ``{"full": {metric: (min, max, source)}, "quick": {...}}``."""
+    path = chapter_data_dir(chapter) / "tolerances.toml"
+    document = read_toml(path)
+    unknown = set(document) - {"meta", "full", "quick"}
+    if unknown:
+        raise DataError(f"{path}: unknown key '{sorted(unknown)[0]}' (expected meta, full, quick)")
+    bands = {}
+    for mode in ("full", "quick"):
+        bands[mode] = {}
+        for metric, band in document.get(mode, {}).items():
+            if set(band) - {"min", "max", "source"} or "source" not in band:
+                raise DataError(f"{path}: key '{mode}.{metric}': needs min and/or max and a source")
+            bands[mode][metric] = (band.get("min", float("-inf")), band.get("max", float("inf")),
+                                   band["source"])
+    return bands
+
+
+def _claims_by_metric(chapter: str) -> dict[str, str]:
+    out = {}
+    for table in claims(chapter).values():
+        text = table.get("claim", "")
+        if "paper_value" in table:
+            text += f" (paper: {table['paper_value']} {table.get('unit', '')})".rstrip()
+        for metric in table.get("metrics", []):
+            out[metric] = text
+    return out
+
+
+def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[CheckRow]:
+    """Rows of the check table for one chapter's last run."""
+    spec = chapter_spec(chapter)
+    path = Path(out_dir or default_output_dir(chapter)) / "metrics.json"
+    if not path.exists():
+        return [CheckRow(chapter, "-", "-", "-", f"no run: {path} missing")]
+    run = json.loads(path.read_text())
+    quick = bool(run.get("quick"))
+    if run.get("parameters") != spec.resolve({}, quick):
+        return [CheckRow(chapter, "-", "-", "-",
+                         "not comparable: parameters differ from the defaults of the tolerances")]
+    bands = load_tolerances(chapter)["quick" if quick else "full"]
+    claim_text = _claims_by_metric(chapter)
+    rows = []
+    for metric, (low, high, _source) in sorted(bands.items()):
+        value = run["metrics"].get(metric)
+        band = f"[{low:g}, {high:g}]"
+        if value is None:
+            status = "FAIL (missing)"
+        else:
+            status = "ok" if low <= float(value) <= high else "FAIL"
+        rows.append(CheckRow(chapter, metric, value, band, status, claim_text.get(metric, "")))
+    return rows
+
+
+def format_rows(rows: list[CheckRow]) -> str:
+    """A plain-text table of check rows."""
+    header = ("chapter", "metric", "value", "band", "status", "paper claim")
+    table = [header] + [(r.chapter, r.metric, f"{r.value:.6g}" if isinstance(r.value, float)
+                         else str(r.value), r.band, r.status, r.claim) for r in rows]
+    widths = [max(len(row[i]) for row in table) for i in range(len(header) - 1)]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(row[:-1], widths)) + "  " + row[-1]
+             for row in table]
+    return "\n".join(lines)
