@@ -7,6 +7,13 @@ For ``ẋ = A x + B u`` partitioned as ``x = [x1; x2]`` with ``x1 = y`` measured
 
 The error ``e = x2 − x̂2`` obeys ``ė = (A22 − L A12) e``: its poles are those of
 ``A22 − L A12``, placed by pole placement on the dual pair ``(A22ᵀ, A12ᵀ)``.
+
+The same algebra holds for a discrete plant ``x[k+1] = Φ x[k] + Γ u[k]``: with ``(Φ, Γ)`` in
+place of ``(A, B)`` the observer ``w[k+1] = F w[k] + G y[k] + H u[k]`` has the error
+``e[k+1] = (Φ22 − L Φ12) e[k]`` (:func:`design_discrete`).  Two discrete observers follow:
+:meth:`ReducedOrderObserver.discretise` (the paper's continuous observer, ZOH-discretised with
+y and u held over a step) and :func:`design_discrete` (designed on the exactly discretised plant;
+with ``u[k] = [q[k], q[k+1]]`` it is exact for a track input linear between samples).
 """
 
 from __future__ import annotations
@@ -65,14 +72,8 @@ def partition(A: np.ndarray, B: np.ndarray, n1: int):
     return A[:n1, :n1], A[:n1, n1:], A[n1:, :n1], A[n1:, n1:], B[:n1], B[n1:]
 
 
-def design(A: np.ndarray, B: np.ndarray, n1: int, poles) -> ReducedOrderObserver:
-    """Design the observer for ``x2 = x[n1:]`` with error poles ``poles`` (1/s).
-
-    Raises
-    ------
-    ValueError
-        If (A22, A12) is not observable, so the poles cannot be placed.
-    """
+def _gopinath(A: np.ndarray, B: np.ndarray, n1: int, poles):
+    """F, G, H, L of the Gopinath observer for x2 = x[n1:] with eig(A22 − L A12) = poles."""
     A11, A12, A21, A22, B1, B2 = partition(np.asarray(A, float), np.asarray(B, float), n1)
     n2 = A22.shape[0]
     poles = np.asarray(poles)
@@ -90,4 +91,32 @@ def design(A: np.ndarray, B: np.ndarray, n1: int, poles) -> ReducedOrderObserver
     F = A22 - L @ A12
     G = F @ L + (A21 - L @ A11)
     H = B2 - L @ B1
-    return ReducedOrderObserver(F, G, H, L)
+    return F, G, H, L
+
+
+def design(A: np.ndarray, B: np.ndarray, n1: int, poles) -> ReducedOrderObserver:
+    """Continuous observer (paper Eq. 12) for ``x2 = x[n1:]`` with error poles ``poles`` (1/s).
+
+    Raises
+    ------
+    ValueError
+        If (A22, A12) is not observable, so the poles cannot be placed.
+    """
+    return ReducedOrderObserver(*_gopinath(A, B, n1, poles))
+
+
+def design_discrete(Phi: np.ndarray, Gamma: np.ndarray, n1: int,
+                    poles_s, dt_s: float) -> DiscreteReducedOrderObserver:
+    """Observer designed on the discrete plant, error poles ``exp(poles_s · dt_s)``.
+
+    Parameters
+    ----------
+    Phi, Gamma : ndarray
+        Discrete plant ``x[k+1] = Phi x[k] + Gamma u[k]``.
+    poles_s : array_like
+        Continuous-time equivalent poles, 1/s.
+    dt_s : float
+        Sample time, s.
+    """
+    F, G, H, L = _gopinath(Phi, Gamma, n1, np.exp(np.asarray(poles_s, float) * dt_s))
+    return DiscreteReducedOrderObserver(F, G, H, L)

@@ -1,0 +1,86 @@
+"""Paper 001: single-wheelset model and the reduced-order observer against independent references."""
+
+import control
+import numpy as np
+import pytest
+
+from railpaper.discretise import foh, simulate_foh
+from railpaper.estimators import reduced_order_observer as roo
+from railpaper.models import single_wheelset as sw
+
+
+@pytest.fixture(scope="module")
+def vehicle():
+    return sw.load_parameters()
+
+
+def test_state_matrix_is_jacobian_of_nonlinear_hertz_model(vehicle):
+    """A and B (corrected Eq. 7) equal the numerical Jacobian of the nonlinear plant at rest."""
+    A, B = sw.state_space(vehicle)
+    h = np.array([1e-6, 1e-9, 1e-6, 1e-9])
+    jac = np.column_stack([
+        (sw.nonlinear_derivative(vehicle, h[i] * np.eye(4)[i], 0.0)
+         - sw.nonlinear_derivative(vehicle, -h[i] * np.eye(4)[i], 0.0)) / (2 * h[i])
+        for i in range(4)])
+    np.testing.assert_allclose(jac, A, rtol=1e-5, atol=1e-9)
+    dq = 1e-9
+    jac_q = (sw.nonlinear_derivative(vehicle, np.zeros(4), dq)
+             - sw.nonlinear_derivative(vehicle, np.zeros(4), -dq)) / (2 * dq)
+    np.testing.assert_allclose(jac_q, B[:, 0], rtol=1e-5)
+    np.testing.assert_allclose(sw.nonlinear_derivative(vehicle, np.zeros(4), 0.0), 0.0, atol=1e-9)
+
+
+def test_row_three_uses_wheelset_mass(vehicle):
+    A, _ = sw.state_space(vehicle)
+    assert A[2, 0] == pytest.approx(vehicle.suspension_damping_Ns_per_m / vehicle.wheelset_mass_kg)
+    # modal check: body bounce near 1.1 Hz, wheelset on the contact spring near 243 Hz
+    freqs = np.sort(np.abs(np.linalg.eigvals(A))) / (2 * np.pi)
+    assert 0.9 < freqs[0] < 1.4 and 200 < freqs[-1] < 300
+
+
+def test_contact_stiffness_from_hertz(vehicle):
+    G = 3.86 * 0.42 ** -0.115 * 1e-8
+    P0 = (41800 + 1800) * 9.8 / 2
+    assert vehicle.contact_stiffness_N_per_m == pytest.approx(2 * 1.5 / G * P0 ** (1 / 3), rel=1e-12)
+
+
+@pytest.mark.parametrize("poles", [[-30.0, -40.0], [-5.0, -80.0], [-150.0, -200.0]])
+def test_observer_poles_placed(vehicle, poles):
+    A, B = sw.state_space(vehicle)
+    obs = roo.design(A, B, 2, poles)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(obs.F).real), np.sort(poles), rtol=1e-6)
+    # the Gopinath structure: F = A22 − L A12, H = B2 − L B1
+    A11, A12, A21, A22, B1, B2 = roo.partition(A, B, 2)
+    np.testing.assert_allclose(obs.F, A22 - obs.L @ A12)
+    np.testing.assert_allclose(obs.H, B2 - obs.L @ B1)
+
+
+def test_observability_of_reduced_pair(vehicle):
+    A, B = sw.state_space(vehicle)
+    _, A12, _, A22, _, _ = roo.partition(A, B, 2)
+    assert np.linalg.matrix_rank(control.obsv(A22, A12)) == 2
+
+
+def test_exact_discrete_observer_error_decays_to_rounding(vehicle):
+    """Noise-free data from the exactly simulated plant: the error decays like exp(p t) to ~1e-9."""
+    A, B = sw.state_space(vehicle)
+    dt = 1e-4
+    t = np.arange(0, 1.0, dt)
+    q = 1e-3 * np.sin(2 * np.pi * 3.0 * t) + 5e-4 * np.sin(2 * np.pi * 17.0 * t)
+    Phi, G0, G1 = foh(A, B, dt)
+    x = simulate_foh(Phi, G0, G1, q[:, None])
+    obs = roo.design_discrete(Phi, np.hstack([G0 - G1, G1]), 2, [-30.0, -40.0], dt)
+    u = np.column_stack([q, np.append(q[1:], q[-1])])
+    x2_hat = obs.run(x[:, :2], u, x[0, 2:] + np.array([0.0, 5e-3]))
+    error = np.abs(x2_hat[:, 1] - x[:, 3])
+    assert error[0] == pytest.approx(5e-3)
+    assert error[-1] < 1e-9
+    # decay at the designed rate: slower pole −30 1/s over 0.5 s → factor e^−15 (×10 margin)
+    k = int(0.5 / dt)
+    assert error[2 * k - 1] < 10 * np.exp(-15) * error[k]
+
+
+def test_design_rejects_wrong_number_of_poles(vehicle):
+    A, B = sw.state_space(vehicle)
+    with pytest.raises(ValueError, match="need 2 observer poles"):
+        roo.design(A, B, 2, [-1.0])
