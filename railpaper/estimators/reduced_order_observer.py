@@ -8,12 +8,9 @@ For ``ẋ = A x + B u`` partitioned as ``x = [x1; x2]`` with ``x1 = y`` measured
 The error ``e = x2 − x̂2`` obeys ``ė = (A22 − L A12) e``: its poles are those of
 ``A22 − L A12``, placed by pole placement on the dual pair ``(A22ᵀ, A12ᵀ)``.
 
-The same algebra holds for a discrete plant ``x[k+1] = Φ x[k] + Γ u[k]``: with ``(Φ, Γ)`` in
-place of ``(A, B)`` the observer ``w[k+1] = F w[k] + G y[k] + H u[k]`` has the error
-``e[k+1] = (Φ22 − L Φ12) e[k]`` (:func:`design_discrete`).  Two discrete observers follow:
-:meth:`ReducedOrderObserver.discretise` (the paper's continuous observer, ZOH-discretised with
-y and u held over a step) and :func:`design_discrete` (designed on the exactly discretised plant;
-with ``u[k] = [q[k], q[k+1]]`` it is exact for a track input linear between samples).
+Two discretisations of the continuous observer serve a sampled implementation:
+``hold="zoh"`` holds y and u over each step (the paper's), ``hold="foh"`` takes them linear
+between samples (exact for a track input linear between samples, error O(dt²) for smooth y).
 """
 
 from __future__ import annotations
@@ -23,7 +20,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from railpaper.discretise import zoh
+from railpaper.discretise import foh, zoh
 
 
 @dataclass(frozen=True)
@@ -35,21 +32,25 @@ class ReducedOrderObserver:
     H: np.ndarray
     L: np.ndarray
 
-    def discretise(self, dt_s: float) -> "DiscreteReducedOrderObserver":
-        """ZOH discretisation with y and u held over each step."""
+    def discretise(self, dt_s: float, hold: str = "zoh") -> "DiscreteReducedOrderObserver":
+        """Discretise with y and u held (``"zoh"``) or linear (``"foh"``) between samples."""
         inputs = np.hstack([self.G, self.H])
-        Phi, Gamma = zoh(self.F, inputs, dt_s)
-        ny = self.G.shape[1]
-        return DiscreteReducedOrderObserver(Phi, Gamma[:, :ny], Gamma[:, ny:], self.L)
+        if hold == "zoh":
+            Phi, Gamma = zoh(self.F, inputs, dt_s)
+            return DiscreteReducedOrderObserver(Phi, Gamma, np.zeros_like(Gamma), self.L)
+        if hold == "foh":
+            Phi, Gamma0, Gamma1 = foh(self.F, inputs, dt_s)
+            return DiscreteReducedOrderObserver(Phi, Gamma0 - Gamma1, Gamma1, self.L)
+        raise ValueError(f"hold must be 'zoh' or 'foh', got {hold!r}")
 
 
 @dataclass(frozen=True)
 class DiscreteReducedOrderObserver:
-    """``w[k+1] = Phi w[k] + Gy y[k] + Gu u[k]``, ``x̂2[k] = w[k] + L y[k]``."""
+    """``w[k+1] = Φ w[k] + Γ_now v[k] + Γ_next v[k+1]``, ``v = [y; u]``, ``x̂2[k] = w[k] + L y[k]``."""
 
     Phi: np.ndarray
-    Gy: np.ndarray
-    Gu: np.ndarray
+    Gamma_now: np.ndarray
+    Gamma_next: np.ndarray
     L: np.ndarray
 
     def run(self, y: np.ndarray, u: np.ndarray, x2_initial: np.ndarray) -> np.ndarray:
@@ -58,12 +59,12 @@ class DiscreteReducedOrderObserver:
         The observer starts from ``x̂2[0] = x2_initial`` (w[0] = x2_initial − L y[0]).
         """
         y = np.asarray(y, float)
-        u = np.asarray(u, float).reshape(len(y), -1)
-        drive = y @ self.Gy.T + u @ self.Gu.T
+        v = np.hstack([y, np.asarray(u, float).reshape(len(y), -1)])
+        drive = v[:-1] @ self.Gamma_now.T + v[1:] @ self.Gamma_next.T
         w = np.empty((len(y), self.Phi.shape[0]))
         w[0] = np.asarray(x2_initial, float) - self.L @ y[0]
         for k in range(len(y) - 1):
-            w[k + 1] = self.Phi @ w[k] + drive[k]          # w[k+1] = Φ w[k] + Γy y[k] + Γu u[k]
+            w[k + 1] = self.Phi @ w[k] + drive[k]          # w[k+1] = Φ w[k] + Γ_now v[k] + Γ_next v[k+1]
         return w + y @ self.L.T                            # x̂2 = w + L y
 
 
@@ -103,20 +104,3 @@ def design(A: np.ndarray, B: np.ndarray, n1: int, poles) -> ReducedOrderObserver
         If (A22, A12) is not observable, so the poles cannot be placed.
     """
     return ReducedOrderObserver(*_gopinath(A, B, n1, poles))
-
-
-def design_discrete(Phi: np.ndarray, Gamma: np.ndarray, n1: int,
-                    poles_s, dt_s: float) -> DiscreteReducedOrderObserver:
-    """Observer designed on the discrete plant, error poles ``exp(poles_s · dt_s)``.
-
-    Parameters
-    ----------
-    Phi, Gamma : ndarray
-        Discrete plant ``x[k+1] = Phi x[k] + Gamma u[k]``.
-    poles_s : array_like
-        Continuous-time equivalent poles, 1/s.
-    dt_s : float
-        Sample time, s.
-    """
-    F, G, H, L = _gopinath(Phi, Gamma, n1, np.exp(np.asarray(poles_s, float) * dt_s))
-    return DiscreteReducedOrderObserver(F, G, H, L)
