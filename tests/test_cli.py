@@ -1,0 +1,47 @@
+"""CLI: bad input ends in one clear line and exit 2, before any kernel starts; track export."""
+
+import pandas as pd
+import pytest
+
+from conftest import railpaper_cli
+
+
+@pytest.mark.parametrize("args, message", [
+    (["run", "no-such-chapter"], "unknown chapter 'no-such-chapter'"),
+    (["run", "reduced-order-observr"], "did you mean 'reduced-order-observer'"),
+    (["run", "reduced-order-observer", "-p", "speed_kmh", "60"], "did you mean 'speeds_kmh'"),
+    (["run", "reduced-order-observer", "-p", "speeds_kmh", "fast"], "expects a non-empty list"),
+    (["run", "reduced-order-observer", "-p", "speeds_kmh", "[0, 60]"], "must be > 0"),
+    (["run", "reduced-order-observer", "-p", "duration_s", "-1"], "must be > 0"),
+    (["run", "reduced-order-observer", "-p", "seed", "1.5"], "expects an integer"),
+    (["check", "nope"], "unknown chapter 'nope'"),
+    (["track", "--spectrum", "fra-9", "-o", "x.csv"], "fra-9"),
+    (["track", "--spectrum", "fra-5", "--component", "sideways", "-o", "x.csv"], "sideways"),
+    (["track", "--spectrum", "fra-5", "--dx-m", "0", "-o", "x.csv"], "dx"),
+])
+def test_bad_input_one_line_exit_2(args, message, tmp_path):
+    result = railpaper_cli(*args)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("railpaper: error:"), result.stderr
+    assert message in lines[0]
+
+
+def test_track_export(tmp_path):
+    out = tmp_path / "profile.csv"
+    result = railpaper_cli("track", "--spectrum", "fra-5", "--component", "vertical",
+                           "--length-m", "2000", "--dx-m", "0.25", "--seed", "0", "-o", str(out))
+    assert result.returncode == 0, result.stderr
+    frame = pd.read_csv(out)
+    assert list(frame.columns) == ["distance_m", "irregularity_m"]
+    assert len(frame) == pytest.approx(8000, abs=2)
+    assert 1e-4 < frame.irregularity_m.std() < 0.05
+
+
+def test_track_list_and_run_list():
+    result = railpaper_cli("track", "--list")
+    assert result.returncode == 0
+    for name in ("fra-1", "fra-6", "german-low", "german-high", "china-hsr"):
+        assert name in result.stdout
+    listing = railpaper_cli("list")
+    assert listing.returncode == 0 and "speeds_kmh" in listing.stdout
