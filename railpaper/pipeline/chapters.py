@@ -74,6 +74,19 @@ def chapter_lock(out_dir: Path):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+def hide_parameter_cells(notebook_path: Path) -> None:
+    """Tag papermill's parameter cells ``remove-cell`` so the book shows the parameter table the
+    notebook prints instead of raw assignments with a staging path."""
+    import nbformat
+
+    notebook = nbformat.read(notebook_path, as_version=4)
+    for cell in notebook.cells:
+        tags = cell.metadata.setdefault("tags", [])
+        if ("parameters" in tags or "injected-parameters" in tags) and "remove-cell" not in tags:
+            tags.append("remove-cell")
+    nbformat.write(notebook, notebook_path)
+
+
 def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                 out_dir: str | Path | None = None, progress: bool = True) -> Path:
     """Execute a chapter notebook with papermill; outputs land in ``out_dir`` only on success.
@@ -110,6 +123,7 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                 request_save_on_cell_execute=False)
             if not (staging / "metrics.json").exists():
                 raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
+            hide_parameter_cells(staging / spec.notebook)
         except BaseException as exc:
             shutil.rmtree(staging, ignore_errors=True)
             if isinstance(exc, papermill.PapermillExecutionError):

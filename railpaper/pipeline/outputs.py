@@ -56,6 +56,13 @@ def save_figure(fig, out_dir: str | Path, name: str) -> Path:
     return path
 
 
+def parameter_table(spec: ChapterSpec, parameters: dict) -> pd.DataFrame:
+    """The run's parameters with their meaning, marking those that differ from the defaults."""
+    rows = [(p.name, parameters[p.name], "" if parameters[p.name] == p.default else "changed",
+             p.meaning) for p in spec.parameters]
+    return pd.DataFrame(rows, columns=["parameter", "value", "vs default", "meaning"])
+
+
 def chapter_data_dir(chapter: str) -> Path:
     """``data/<chapter>/``: parameters, claims, tolerances and errata of one chapter."""
     return DATA_DIR / chapter
