@@ -1,0 +1,200 @@
+"""One Rao–Blackwellised particle filter (RBPF) for static parameters of linear-Gaussian models.
+
+Particles carry parameter vectors θ_i (N, d); each particle carries its own Kalman filter for
+the linear state, run with the matrices ``system(θ_i)``.  The model is a callable
+``system(theta (N, d)) -> LinearGaussianBatch`` (see :mod:`railpaper.estimators.kalman`), so the
+same engine serves paper 004's toy, paper 003's Eq. (18) toy and paper 003's lateral vehicle
+model (where ``system`` discretises A(θ) per particle).  ``system`` is called only when θ
+changes; resampling reuses the matrices by index.
+
+Step k (paper 003, Steps 2.1–2.6; Step 2.6 of step k−1 is done first here):
+
+1. KF prediction of every particle's state with its own matrices (and the known input u_k);
+2. KF measurement update; its predictive log-likelihood ``log N(y_k; H x⁻, S)`` updates the
+   log weight (paper 003 Step 2.1, paper 004 Eqs. 3–6);
+3. estimates: weighted parameter mean/std (paper 003 Eq. 17), mixture state mean/std, ESS;
+4. resampling (systematic, paper 003 Step 2.3);
+5. Liu–West kernel move of θ (paper 003 Eq. 12 / Step 2.5); new matrices ``system(θ)``.
+
+Schemes
+-------
+``scheme="paper"``
+    Resample AND move at every step, as papers 003 and 004 describe.
+``scheme="working"``
+    Resample only when ESS < ``ess_fraction`` N; move only right after resampling; the move is
+    made on normalised parameters (offset/scale from the initial cloud unless given); optional
+    likelihood tempering: weight increments multiplied by ``min(1, k / tempering_steps)`` over
+    the first ``tempering_steps`` steps (this flattens the early posterior on purpose).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.particles import (effective_sample_size, liu_west_move,
+                                            normalise_log_weights, systematic_resample,
+                                            weighted_mean_cov)
+
+SCHEMES = ("paper", "working")
+
+
+@dataclass
+class FilterRun:
+    """Per-step outputs of a parameter filter over K steps (row k-1 = after y_k).
+
+    Attributes
+    ----------
+    theta_mean, theta_std : ndarray, (K, d)
+        Weighted mean and standard deviation of the parameter particles.
+    x_mean, x_std : ndarray, (K, n)
+        Mixture mean and standard deviation of the linear state.
+    ess : ndarray, (K,)
+        Effective sample size of the weights used for the estimate.
+    resampled : ndarray of bool, (K,)
+    degenerate : ndarray of bool, (K,)
+        Weights could not be normalised (all −inf/NaN) and fell back to uniform.
+    log_evidence : ndarray, (K,)
+        Particle estimate of log p(y_k | y_1..k-1) (untempered steps only; NaN otherwise).
+    theta, weights : ndarray
+        Final particles (N, d) and their normalised weights (N,).
+    """
+
+    theta_mean: np.ndarray
+    theta_std: np.ndarray
+    x_mean: np.ndarray
+    x_std: np.ndarray
+    ess: np.ndarray
+    resampled: np.ndarray
+    degenerate: np.ndarray
+    log_evidence: np.ndarray
+    theta: np.ndarray
+    weights: np.ndarray
+
+
+def mixture_moments(x: np.ndarray, P: np.ndarray, weights: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and per-component std of the Gaussian mixture Σ w_i N(x_i, P_i)."""
+    mean = weights @ x
+    second = weights @ (np.diagonal(P, axis1=-2, axis2=-1) + x * x)
+    return mean, np.sqrt(np.clip(second - mean * mean, 0.0, None))
+
+
+class RaoBlackwellisedPF:
+    """Stateful RBPF; call :meth:`step` once per measurement (usable in real time).
+
+    Parameters
+    ----------
+    system : callable
+        ``system(theta (N, d)) -> LinearGaussianBatch``.
+    theta0 : ndarray, (N, d)
+        Initial parameter particles (e.g. uniform on the prior box).
+    x0 : ndarray, (n,) or (N, n)
+        Initial state mean of every particle's Kalman filter.
+    P0 : ndarray, (n, n) or (N, n, n)
+        Initial state covariance.
+    rng : numpy.random.Generator
+        The only source of randomness.
+    scheme : {"paper", "working"}
+    delta : float
+        Liu–West discount factor δ (a = (3δ−1)/(2δ), h² = 1 − a²).
+    move : bool
+        False disables the Liu–West move (parameters then only resampled).
+    ess_fraction : float
+        "working": resample when ESS < ess_fraction · N.
+    tempering_steps : int
+        "working": likelihood tempering over the first steps (0 = off).
+    offset, scale : ndarray, (d,), optional
+        Normalisation of the (log-)parameters for the move ("working" default: mean and std of
+        the initial cloud; "paper": none).
+    log_mask : ndarray of bool, (d,), optional
+        Parameters moved in log space (must be positive).
+    """
+
+    def __init__(self, system: Callable[[np.ndarray], LinearGaussianBatch], theta0, x0, P0,
+                 rng: np.random.Generator, *, scheme: str = "paper", delta: float = 0.98,
+                 move: bool = True, ess_fraction: float = 0.5, tempering_steps: int = 0,
+                 offset=None, scale=None, log_mask=None):
+        if scheme not in SCHEMES:
+            raise ValueError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
+        self.system, self.rng, self.scheme = system, rng, scheme
+        self.delta, self.move = float(delta), bool(move)
+        self.ess_fraction, self.tempering_steps = float(ess_fraction), int(tempering_steps)
+        self.theta = np.array(theta0, dtype=float, ndmin=2)
+        n_particles = self.theta.shape[0]
+        x0, P0 = np.asarray(x0, float), np.asarray(P0, float)
+        self.x = np.broadcast_to(x0, (n_particles, x0.shape[-1])).copy()
+        self.P = np.broadcast_to(P0, (n_particles,) + P0.shape[-2:]).copy()
+        self.log_w = np.full(n_particles, -np.log(n_particles))
+        self.log_mask = None if log_mask is None else np.asarray(log_mask, bool)
+        if scheme == "working" and offset is None and scale is None:
+            z = self.theta.copy()
+            if self.log_mask is not None:
+                z[:, self.log_mask] = np.log(z[:, self.log_mask])
+            offset, scale = z.mean(axis=0), z.std(axis=0)
+            scale = np.where(scale > 0, scale, 1.0)
+        self.offset, self.scale = offset, scale
+        self.k = 0
+        self.sys = system(self.theta)
+
+    def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
+        """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
+        self.k += 1
+        n_particles = self.theta.shape[0]
+        s = self.sys
+        x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)           # Step 2.6
+        x, P, loglik, _, _ = update(x_prior, P_prior, y, s.H, s.R)              # Steps 2.1, 2.4
+        beta = 1.0
+        if self.scheme == "working" and self.k <= self.tempering_steps:
+            beta = self.k / self.tempering_steps
+        w, log_norm, degenerate = normalise_log_weights(self.log_w + beta * loglik)
+        theta_mean, theta_cov = weighted_mean_cov(self.theta, w)                # Eq. 17
+        x_mean, x_std = mixture_moments(x, P, w)
+        ess = effective_sample_size(w)
+        out = dict(theta_mean=theta_mean, theta_std=np.sqrt(np.diag(theta_cov)),
+                   x_mean=x_mean, x_std=x_std, ess=ess, degenerate=degenerate,
+                   log_evidence=log_norm if beta == 1.0 else np.nan)
+        resample = (self.scheme == "paper" or degenerate
+                    or ess < self.ess_fraction * n_particles)
+        theta, sys = self.theta, s
+        if resample:                                                            # Step 2.3
+            idx = systematic_resample(w, self.rng)
+            theta, x, P, sys = theta[idx], x[idx], P[idx], s.take(idx)
+            w = np.full(n_particles, 1.0 / n_particles)
+        if self.move and (self.scheme == "paper" or resample):                  # Step 2.5
+            theta = liu_west_move(theta, w, self.delta, self.rng, self.offset, self.scale,
+                                  self.log_mask)
+            sys = self.system(theta)
+        with np.errstate(divide="ignore"):
+            self.log_w = np.log(w)
+        self.theta, self.x, self.P, self.sys = theta, x, P, sys
+        out["resampled"] = resample
+        return out
+
+
+def stack_steps(outputs: list[dict], theta: np.ndarray, weights: np.ndarray) -> FilterRun:
+    """Stack per-step dicts into a :class:`FilterRun`."""
+    def col(key, dtype=float):
+        return np.array([o[key] for o in outputs], dtype=dtype)
+    return FilterRun(theta_mean=col("theta_mean"), theta_std=col("theta_std"),
+                     x_mean=col("x_mean"), x_std=col("x_std"), ess=col("ess"),
+                     resampled=col("resampled", bool), degenerate=col("degenerate", bool),
+                     log_evidence=col("log_evidence"), theta=theta, weights=weights)
+
+
+def run_filter(filt, y: np.ndarray, u: np.ndarray | None = None) -> FilterRun:
+    """Run a stateful parameter filter (RBPF or Q-GRBPF) over measurements y (K, p)."""
+    y = np.asarray(y, float)
+    outputs = [filt.step(y[k], None if u is None else u[k]) for k in range(len(y))]
+    return stack_steps(outputs, filt.theta.copy(), np.exp(filt.log_w))
+
+
+def run_rbpf(system, y, theta0, x0, P0, rng, *, u=None, **options) -> FilterRun:
+    """Run :class:`RaoBlackwellisedPF` over ``y`` (K, p) with inputs ``u`` (K, m) or None.
+
+    ``options`` are the keyword options of :class:`RaoBlackwellisedPF`.
+    """
+    return run_filter(RaoBlackwellisedPF(system, theta0, x0, P0, rng, **options), y, u)
