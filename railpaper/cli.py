@@ -50,10 +50,9 @@ def cmd_run(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from railpaper.experiments import available_chapters
-    from railpaper.pipeline.chapters import chapter_spec
+    from railpaper.pipeline.chapters import book_chapters, chapter_spec
     from railpaper.pipeline.check import check_chapter, format_rows
-    chapters = args.chapters or available_chapters()
+    chapters = args.chapters or book_chapters()
     rows = []
     for name in chapters:
         chapter_spec(name)

@@ -7,8 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from railpaper.experiments import available_chapters
-from railpaper.pipeline.chapters import BOOK_DIR, PipelineError, chapter_spec, run_chapter
+from railpaper.pipeline.chapters import (BOOK_DIR, PipelineError, book_chapters, chapter_spec,
+                                         run_chapter)
 
 MATHJAX_SCRIPT = Path("_static/mathjax/node_modules/mathjax/es5/tex-chtml.js")
 
@@ -45,7 +45,7 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
                         ignore=shutil.ignore_patterns("_build", "chapters", ".*"))
     if not (book / MATHJAX_SCRIPT).exists():
         raise PipelineError(f"MathJax is not installed at {book / MATHJAX_SCRIPT}; run `make venv`")
-    chapters = available_chapters()
+    chapters = book_chapters()
     for name in chapters:
         print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}", file=sys.stderr)
         run_chapter(name, {}, quick, book / "chapters" / name, progress=progress)

@@ -34,6 +34,12 @@ def chapter_spec(name: str) -> ChapterSpec:
     return load_chapter(name).SPEC
 
 
+def book_chapters() -> list[str]:
+    """Chapters with both an experiment module and a notebook, in book order."""
+    return [name for name in available_chapters()
+            if (NOTEBOOK_DIR / load_chapter(name).SPEC.notebook).exists()]
+
+
 def default_output_dir(name: str) -> Path:
     """Where the book takes a chapter's executed notebook and outputs from."""
     return BOOK_DIR / "chapters" / name
