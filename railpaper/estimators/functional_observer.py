@@ -283,6 +283,9 @@ def design(A: np.ndarray, B: np.ndarray, C: np.ndarray, L: np.ndarray, alpha_per
         if np.linalg.norm(V - V @ Up @ U) > 1e-8 * max(np.linalg.norm(V), 1.0):
             raise ValueError("H B = 0 has no solution Z for this system")
         fixed = fixed_modes(N1 - V @ Up @ N2, (np.eye(U.shape[0]) - U @ Up) @ N2)
+    if len(fixed) and not in_region(fixed / sc.tau_s, alpha_per_s, beta, sector_deg, rtol=1e-9):
+        raise LMIInfeasible(f"fixed poles {np.round(np.sort_complex(fixed / sc.tau_s), 4)} 1/s lie "
+                            f"outside the region {alpha_per_s:g} ≤ −Re λ ≤ {beta * alpha_per_s:g}")
     Z, _ = region_gain(N1 / w0, N2 / w0, 1.0 / np.sqrt(beta), beta, sector_deg, equality)
     Ns, Js, Hs, Es = par.matrices(Z)
     Dz, Dy, S, tau = sc.Dz, sc.Dy, sc.S, sc.tau_s

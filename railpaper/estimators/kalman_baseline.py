@@ -47,7 +47,7 @@ class ShapingFilter:
 
 
 def fit_shaping_filter(omega_rad_s: np.ndarray, psd: np.ndarray,
-                       variance: float | None = None, variance_weight: float = 3.0) -> ShapingFilter:
+                       variance: float | None = None, variance_weight: float = 30.0) -> ShapingFilter:
     """Least-squares fit of a second-order shaping filter to PSD samples (log scale).
 
     Parameters

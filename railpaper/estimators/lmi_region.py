@@ -16,6 +16,8 @@ equality constraints ``G U = P V`` express ``Z U = V`` (e.g. H B = 0).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 
@@ -46,6 +48,9 @@ def region_gain(N1: np.ndarray, N2: np.ndarray, alpha: float, beta: float,
         Linear constraint ``Z U = V`` imposed as ``G U = P V``.
     margin : float
         Strictness margin of the matrix inequalities (they are well scaled when α ~ 1).
+
+    An ``optimal_inaccurate`` solver status is accepted: callers check the resulting poles
+    (:func:`in_region`).
 
     Returns
     -------
@@ -78,7 +83,9 @@ def region_gain(N1: np.ndarray, N2: np.ndarray, alpha: float, beta: float,
         cons.append(G @ U == P @ V)
     problem = cp.Problem(cp.Minimize(cp.norm(G, "fro") + 1e-3 * cp.trace(P)), cons)
     try:
-        problem.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():   # "inaccurate" is reported through the status below
+            warnings.simplefilter("ignore", UserWarning)
+            problem.solve(solver=cp.CLARABEL)
     except cp.error.SolverError as exc:  # numerical failure: treat as infeasible, say so
         raise LMIInfeasible(f"solver failed: {exc}") from None
     if problem.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or P.value is None:
