@@ -30,7 +30,8 @@ def test_spec_and_validation():
     quick = ch.SPEC.resolve({}, quick=True)
     assert quick["speeds_kmh"] == [60.0, 80.0, 120.0, 160.0] and quick["duration_s"] >= 2.0
     for bad in ({"beta": 1.0}, {"error_window_start_s": 9.0}, {"dt_s": 0.01},
-                {"wavelength_min_m": 400.0}):
+                {"wavelength_min_m": 400.0}, {"speeds_kmh": [60.0, 60.0]},
+                {"hb_zero_alpha_per_s": 20.0}):
         with pytest.raises(ParameterError):
             ch.run(quick=True, **ch.SPEC.resolve(bad, quick=True))
     with pytest.raises(ParameterError):

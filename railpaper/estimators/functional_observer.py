@@ -28,12 +28,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import matrix_balance, null_space
+from scipy.linalg import matrix_balance
 
 from railpaper.discretise import foh, zoh
 from railpaper.estimators.lmi_region import LMIInfeasible, in_region, region_gain
 
-__all__ = ["Scaling", "scaling_for", "existence", "Parametrisation", "parametrise", "design",
+__all__ = ["Scaling", "scaling_for", "numerical_rank", "pencil_zeros", "existence", "Parametrisation", "parametrise", "design",
            "FunctionalObserver", "DiscreteFunctionalObserver", "fixed_modes", "LMIInfeasible"]
 
 RANK_RTOL = 1e-9
@@ -68,7 +68,8 @@ def scaling_for(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> Scaling:
     return Scaling(tau, S, Dy, Dz)
 
 
-def _rank(X: np.ndarray) -> int:
+def numerical_rank(X: np.ndarray) -> int:
+    """Number of singular values above ``RANK_RTOL`` times the largest (call on scaled matrices)."""
     if X.size == 0:
         return 0
     s = np.linalg.svd(X, compute_uv=False)
@@ -91,7 +92,7 @@ def pencil_zeros(E: np.ndarray, F: np.ndarray, rng_seed: int = 0,
     """
     rng = np.random.default_rng(rng_seed)
     probe = [np.complex128(complex(*rng.standard_normal(2))) for _ in range(3)]
-    normal = max(_rank(s * E - F) for s in probe)
+    normal = max(numerical_rank(s * E - F) for s in probe)
     rows, cols = E.shape
     if normal == 0:
         return 0, np.zeros(0, complex)
@@ -100,7 +101,7 @@ def pencil_zeros(E: np.ndarray, F: np.ndarray, rng_seed: int = 0,
     from scipy.linalg import eigvals
     cand = eigvals(Rl @ F @ Rr, Rl @ E @ Rr)
     cand = cand[np.isfinite(cand) & (np.abs(cand) < max_modulus)]
-    zeros = [s for s in cand if _rank(s * E - F) < normal]
+    zeros = [s for s in cand if numerical_rank(s * E - F) < normal]
     return normal, np.array(zeros, complex)
 
 
@@ -117,8 +118,8 @@ def existence(A: np.ndarray, C: np.ndarray, L: np.ndarray) -> dict:
     sc = scaling_for(A, C, L)
     At, _, Ct, Lt = sc.apply(A, np.zeros((A.shape[0], 0)), C, L)
     base = np.vstack([Ct @ At, Ct, Lt])
-    r_base = _rank(base)
-    r_ext = _rank(np.vstack([Lt @ At, base]))
+    r_base = numerical_rank(base)
+    r_ext = numerical_rank(np.vstack([Lt @ At, base]))
     E = np.vstack([Lt, np.zeros((2 * Ct.shape[0], Lt.shape[1]))])
     F = np.vstack([Lt @ At, -Ct @ At, -Ct])
     normal, zeros = pencil_zeros(E, F)
