@@ -166,3 +166,13 @@ def test_experiment_smoke():
     assert a.timings["seconds_per_step_qgrbpf_N20"] > 0
     with pytest.raises(chapter.ParameterError):
         chapter.run(quick=True, **dict(params, a_true=0.9))
+
+
+def test_parameters_toml_matches_spec_defaults():
+    from railpaper.data import data_path, load_quantities
+    from railpaper.experiments import quasi_gaussian_rbpf as chapter
+
+    quantities = load_quantities(data_path("quasi-gaussian-rbpf/parameters.toml"))
+    defaults = chapter.SPEC.defaults()
+    for key, quantity in quantities.items():
+        assert defaults[key] == pytest.approx(quantity.value), key
