@@ -5,7 +5,7 @@ SHELL := /bin/bash
 PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
-MATHJAX := book/_static/mathjax/node_modules/mathjax/tex-chtml.js
+MATHJAX := book/_static/mathjax/node_modules/mathjax/es5/tex-chtml.js
 
 .PHONY: book book-quick test venv lock clean
 
@@ -15,7 +15,6 @@ $(BIN)/railpaper: environment.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r environment.lock
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
-	$(BIN)/python -m ipykernel install --prefix $(VENV) --name railpaper --display-name "railpaper (.venv)" >/dev/null
 	touch $(BIN)/railpaper
 
 # MathJax 3 for the offline book, pinned by book/_static/mathjax/package-lock.json.
