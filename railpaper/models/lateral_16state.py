@@ -1,0 +1,182 @@
+"""Paper 003's lateral high-speed vehicle model (§1.1, Eqs. 1–9): 7 DOF, 16 states.
+
+State (paper's order)::
+
+    0 ẏw1  1 yw1  2 ψ̇w1  3 ψw1  4 ẏw2  5 yw2  6 ψ̇w2  7 ψw2
+    8 ẏb   9 yb  10 ψ̇b  11 ψb  12 ẏbd 13 ybd 14 d1   15 d2
+
+(m, rad, m/s, rad/s), input ``u = (ẏt1, ẏt2)`` (track lateral velocity under each wheelset,
+m/s; the rear one delayed by 2a/V), ``ḋ_j = ẏw_j − ẏt_j`` (Eqs. 8–9, the paper's B has 17
+rows — an erratum; here B is 16×2 with −1 in rows d1, d2).
+
+The estimated parameters θ = (Csy, λ, Kpy, Ksy, Csaly) enter A linearly, so
+``A(θ) = A0 + Σ_k θ_k A_k`` (:func:`affine_terms`); :func:`build_A_direct` writes the
+equations out one by one (the test checks the two agree).  The measurements are the lateral
+accelerations of both wheelsets, the bogie and the car body (rows of A, no feed-through since B
+only drives d) and the bogie yaw rate: ``H(θ) = S A(θ) + e_ψ̇b`` — also affine.
+
+Fixed quantities (SI units) are the keys of :data:`FIXED_KEYS`: ``mw, mb, mbd`` kg, ``iwz, ib``
+kg m², ``kpx`` N/m (as it appears in ``K_px b²``), ``a, b, lbw, l0, r0`` m, ``f11, f22`` N.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import expm
+
+from railpaper.estimators.kalman import LinearGaussianBatch
+
+STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
+               "vyb", "yb", "vpsib", "psib", "vybd", "ybd", "d1", "d2")
+PARAM_NAMES = ("csy", "lambda", "kpy", "ksy", "csaly")
+FIXED_KEYS = ("mw", "iwz", "mb", "ib", "mbd", "kpx", "a", "b", "lbw", "l0", "r0", "f11", "f22")
+CHANNELS = ("acc_w1_mps2", "acc_w2_mps2", "acc_b_mps2", "acc_bd_mps2", "yawrate_b_radps")
+N_STATES = 16
+ACC_ROWS = (0, 4, 8, 12)
+YAW_RATE_STATE = 10
+
+
+def _accelerations(fx: dict, theta, v: float) -> np.ndarray:
+    """A written equation by equation (Eqs. 1–9) for one θ; the reference for the affine form."""
+    csy, lam, kpy, ksy, csaly = theta
+    mw, iwz, mb, ib, mbd = fx["mw"], fx["iwz"], fx["mb"], fx["ib"], fx["mbd"]
+    kpx, a, b, lbw, l0, r0 = fx["kpx"], fx["a"], fx["b"], fx["lbw"], fx["l0"], fx["r0"]
+    f11, f22 = fx["f11"], fx["f22"]
+    A = np.zeros((N_STATES, N_STATES))
+    for i in (1, 3, 5, 7, 9, 11, 13):          # displacement' = velocity
+        A[i, i - 1] = 1.0
+    for w, sgn in ((0, 1.0), (4, -1.0)):        # Eqs. (1)/(3) and (2)/(4)
+        A[w, w] = -2 * f22 / v / mw
+        A[w, w + 1] = -kpy / mw
+        A[w, w + 3] = 2 * f22 / mw
+        A[w, 9] = kpy / mw
+        A[w, 11] = sgn * kpy * a / mw
+        dj = 14 if w == 0 else 15
+        A[w + 2, w + 2] = -2 * f11 * l0 ** 2 / v / iwz
+        A[w + 2, w + 3] = -kpx * b ** 2 / iwz
+        A[w + 2, 11] = kpx * b ** 2 / iwz
+        A[w + 2, dj] = -2 * f11 * lam * l0 / r0 / iwz
+        A[dj, w] = 1.0                          # Eqs. (8)/(9): d' = ẏw − ẏt
+    # Eq. (5): bogie lateral
+    A[8, 1] = kpy / mb
+    A[8, 5] = kpy / mb
+    A[8, 8] = -csy / mb
+    A[8, 9] = -(2 * kpy + ksy) / mb
+    A[8, 12] = csy / mb
+    A[8, 13] = ksy / mb
+    # Eq. (6): bogie yaw
+    A[10, 1] = a * kpy / ib
+    A[10, 3] = kpx * b ** 2 / ib
+    A[10, 5] = -a * kpy / ib
+    A[10, 7] = kpx * b ** 2 / ib
+    A[10, 10] = -csaly * lbw ** 2 / ib
+    A[10, 11] = -(2 * a ** 2 * kpy + 2 * kpx * b ** 2) / ib
+    # Eq. (7): car body lateral
+    A[12, 8] = csy / mbd
+    A[12, 9] = ksy / mbd
+    A[12, 12] = -csy / mbd
+    A[12, 13] = -ksy / mbd
+    return A
+
+
+def build_A_direct(fixed: dict, theta, speed_mps: float) -> np.ndarray:
+    """A(θ) (16×16, 1/s) built directly from Eqs. (1)–(9) for one θ = (Csy, λ, Kpy, Ksy, Csaly)."""
+    return _accelerations(fixed, np.asarray(theta, float), float(speed_mps))
+
+
+def affine_terms(fixed: dict, speed_mps: float) -> tuple[np.ndarray, np.ndarray]:
+    """``A0`` (16, 16) and ``A_k`` (5, 16, 16) with ``A(θ) = A0 + Σ θ_k A_k``.
+
+    Computed from the direct build by linearity: A0 = A(0), A_k = A(e_k) − A(0).
+    """
+    A0 = _accelerations(fixed, np.zeros(5), speed_mps)
+    Ak = np.stack([_accelerations(fixed, np.eye(5)[k], speed_mps) - A0 for k in range(5)])
+    return A0, Ak
+
+
+def input_matrix() -> np.ndarray:
+    """B (16, 2): u = (ẏt1, ẏt2) enters only d1, d2 with −1 (Eqs. 8–9)."""
+    B = np.zeros((N_STATES, 2))
+    B[14, 0] = B[15, 1] = -1.0
+    return B
+
+
+def measurement_matrix(A: np.ndarray) -> np.ndarray:
+    """H (…, 5, 16) from A (…, 16, 16): four lateral accelerations and the bogie yaw rate."""
+    A = np.asarray(A, float)
+    H = np.zeros(A.shape[:-2] + (5, N_STATES))
+    H[..., :4, :] = A[..., ACC_ROWS, :]
+    H[..., 4, YAW_RATE_STATE] = 1.0
+    return H
+
+
+def a_of_theta(A0: np.ndarray, Ak: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """A(θ) for θ (N, 5) → (N, 16, 16) by the affine form."""
+    theta = np.atleast_2d(theta)
+    return A0 + np.einsum("nk,kij->nij", theta, Ak)
+
+
+def least_damped(A: np.ndarray, zero_tol: float = 1e-6) -> tuple[float, float]:
+    """(max real part 1/s, its frequency Hz) of A's eigenvalues, the structural zeros excluded.
+
+    A has two zero eigenvalues (d_j − yw_j is constant without input); they are not modes of
+    the vehicle and are left out.
+    """
+    ev = np.linalg.eigvals(A)
+    ev = ev[np.abs(ev) > zero_tol]
+    i = int(np.argmax(ev.real))
+    return float(ev[i].real), float(abs(ev[i].imag) / (2 * np.pi))
+
+
+def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-damped real part over speeds, and the first speed (m/s) where it crosses 0 (-1: none).
+
+    The crossing is interpolated linearly between grid speeds.
+    """
+    re = np.array([least_damped(build_A_direct(fixed, theta, v))[0] for v in speeds_mps])
+    above = np.nonzero(re > 0)[0]
+    if above.size == 0:
+        return re, -1.0
+    j = int(above[0])
+    if j == 0:
+        return re, float(speeds_mps[0])
+    v0, v1, r0, r1 = speeds_mps[j - 1], speeds_mps[j], re[j - 1], re[j]
+    return re, float(v0 + (v1 - v0) * (-r0) / (r1 - r0))
+
+
+def zoh_batch(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ZOH ``(e^{A dt}, ∫ e^{As} ds B)`` of a stack A (N, n, n), one batched expm."""
+    A = np.atleast_3d(A) if A.ndim == 2 else A
+    N, n = A.shape[0], A.shape[-1]
+    m = B.shape[-1]
+    M = np.zeros((N, n + m, n + m))
+    M[:, :n, :n] = A * dt_s
+    M[:, :n, n:] = B * dt_s
+    E = expm(M)
+    return E[:, :n, :n], E[:, :n, n:]
+
+
+def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray):
+    """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle)."""
+    A0, Ak = affine_terms(fixed, speed_mps)
+    B = input_matrix()
+
+    def system(theta: np.ndarray) -> LinearGaussianBatch:
+        A = a_of_theta(A0, Ak, theta)
+        F, G = zoh_batch(A, B, dt_s)
+        return LinearGaussianBatch(F, Q, measurement_matrix(A), R, G)
+
+    return system
+
+
+def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fine: np.ndarray,
+                   ) -> np.ndarray:
+    """States on the fine grid (K+1, 16) from rest, ZOH of the fine input u_fine (K, 2)."""
+    A = build_A_direct(fixed, theta, speed_mps)
+    F, G = zoh_batch(A[None], input_matrix(), dt_fine_s)
+    F, G = F[0], G[0]
+    x = np.zeros((len(u_fine) + 1, N_STATES))
+    drive = u_fine @ G.T
+    for k in range(len(u_fine)):
+        x[k + 1] = F @ x[k] + drive[k]
+    return x
