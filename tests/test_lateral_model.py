@@ -95,3 +95,18 @@ def test_crlb_matches_closed_form_ar1():
     closed = np.sum(x[:K] ** 2) / q           # x_0 = 0 enters with weight 0
     assert info[0, 0] == pytest.approx(closed, rel=1e-4)
     assert crlb_std(info)[0] == pytest.approx(1 / np.sqrt(closed), rel=1e-4)
+
+
+def test_ekf_model_derivatives_match_finite_differences():
+    model = L.ekf_model(FIXED, V, 1e-3)
+    F, G, H, dF, dG, dH = model(THETA)
+    for k in (0, 2, 4):
+        h = 1e-6 * THETA[k]
+        tp, tm = THETA.copy(), THETA.copy()
+        tp[k] += h
+        tm[k] -= h
+        Fp, Gp, Hp, *_ = model(tp)
+        Fm, Gm, Hm, *_ = model(tm)
+        np.testing.assert_allclose(dF[k], (Fp - Fm) / (2 * h), rtol=1e-4, atol=1e-10)
+        np.testing.assert_allclose(dG[k], (Gp - Gm) / (2 * h), rtol=1e-4, atol=1e-12)
+        np.testing.assert_allclose(dH[k], (Hp - Hm) / (2 * h), rtol=1e-5, atol=1e-9)

@@ -180,3 +180,31 @@ def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fin
     for k in range(len(u_fine)):
         x[k + 1] = F @ x[k] + drive[k]
     return x
+
+
+def ekf_model(fixed: dict, speed_mps: float, dt_s: float):
+    """``model(theta (5,)) -> (F, G, H, dF, dG, dH)`` for the augmented EKF.
+
+    F, G are the exact ZOH of A(θ), B; their derivatives along each A_k are the upper-right
+    blocks of ``expm([[M, M_k], [0, M]])`` (Van Loan), M = [[A, B], [0, 0]] dt.
+    """
+    A0, Ak = affine_terms(fixed, speed_mps)
+    B = input_matrix()
+    n, m = N_STATES, B.shape[1]
+    Hk = measurement_matrix(Ak)
+    Hk[:, 4, YAW_RATE_STATE] = 0.0                  # the yaw-rate row does not depend on θ
+
+    def model(theta):
+        A = a_of_theta(A0, Ak, theta)[0]
+        M = np.zeros((n + m, n + m))
+        M[:n, :n], M[:n, n:] = A * dt_s, B * dt_s
+        big = np.zeros((5, 2 * (n + m), 2 * (n + m)))
+        big[:, :n + m, :n + m] = M
+        big[:, n + m:, n + m:] = M
+        big[:, :n, n + m:n + m + n] = Ak * dt_s
+        E = expm(big)
+        F, G = E[0, :n, :n], E[0, :n, n:n + m]
+        dE = E[:, :n + m, n + m:]
+        return F, G, measurement_matrix(A), dE[:, :n, :n], dE[:, :n, n:n + m], Hk
+
+    return model
