@@ -9,6 +9,7 @@ that does not need it.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 CHAPTER_MODULES = {
     "reduced-order-observer": "railpaper.experiments.reduced_order_observer",
