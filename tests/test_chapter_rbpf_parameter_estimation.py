@@ -1,0 +1,83 @@
+"""Chapter rbpf-parameter-estimation: quick run within tolerances, validation, robustness."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from railpaper.data import DATA_DIR, read_toml
+from railpaper.experiments import rbpf_parameter_estimation as chapter
+from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.estimators.rbpf import run_rbpf
+from railpaper.models import lateral_16state as L
+
+PARAMS = ("csy", "lambda", "kpy", "ksy", "csaly")
+REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme",
+             "ekf_lateral_converged_of_10", "toy_ekf_diverged_init1", "toy_ekf_diverged_init2",
+             "toy_final_abs_error_max_rbpf_init1"]
+            + [f"{k}_{p}{s}" for p in PARAMS for s in ("", "_paper_scheme")
+               for k in ("steps_to_within_5pct", "final_relative_error")]
+            + [f"crlb_rel_350_{p}" for p in PARAMS])
+
+
+@pytest.fixture(scope="module")
+def quick_result():
+    params = chapter.SPEC.resolve({}, quick=True)
+    return params, chapter.run(quick=True, **params)
+
+
+def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
+    params, result = quick_result
+    metrics = check_metrics(result.metrics)
+    for key in REQUIRED:
+        assert key in metrics, key
+    assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
+    tol = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "tolerances.toml")["quick"]
+    for key, band in tol.items():
+        assert band["min"] <= metrics[key] <= band["max"], (key, metrics[key], band)
+    ts = result.timeseries
+    assert list(ts.columns[:6]) == ["t_s"] + [f"{p}_norm" for p in PARAMS]
+    assert len(ts) == params["n_steps"] and math.isclose(ts.t_s.iloc[0], params["dt_s"])
+    toy = result.extra_tables["toy_timeseries"]
+    assert toy.columns[0] == "step" and len(toy) == params["toy_steps"]
+
+
+def test_steps_to_within():
+    norm = np.array([[1.2, 1.0], [1.01, 1.1], [0.99, 1.0], [1.0, 1.2]])
+    np.testing.assert_array_equal(chapter.steps_to_within(norm), [2, -1])
+
+
+def test_non_physical_parameters_raise_one_line():
+    params = chapter.SPEC.resolve({"prior_low": 1.1}, quick=True)
+    with pytest.raises(ParameterError, match="prior_low"):
+        chapter.run(quick=True, **params)
+    params = chapter.SPEC.resolve({"spectrum": "nope"}, quick=True)
+    with pytest.raises(ParameterError, match="spectrum"):
+        chapter.run(quick=True, **params)
+
+
+def test_measurements_csv_validation(tmp_path):
+    params = chapter.SPEC.resolve({}, quick=True)
+    bad = tmp_path / "bad.csv"
+    pd.DataFrame({"t_s": np.arange(20) * 1e-3, "acc_w1_mps2": 0.0}).to_csv(bad, index=False)
+    with pytest.raises(ParameterError, match="missing column"):
+        chapter.read_measurements(str(bad), params)
+    good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in L.CHANNELS}})
+    good.to_csv(tmp_path / "step.csv", index=False)
+    with pytest.raises(ParameterError, match="dt_s"):
+        chapter.read_measurements(str(tmp_path / "step.csv"), params)
+    good["t_s"] = np.arange(20) * 1e-3
+    good.to_csv(tmp_path / "ok.csv", index=False)
+    rec = chapter.read_measurements(str(tmp_path / "ok.csv"), params)
+    assert rec["y"].shape == (20, 5) and rec["u"] is None
+
+
+def test_lateral_rbpf_survives_degenerate_weights():
+    fixed, theta = chapter.vehicle()
+    system = L.lateral_system(fixed, 300 / 3.6, 1e-3, 1e-12 * np.eye(16), 1e-6 * np.eye(5))
+    rng = np.random.default_rng(0)
+    y = np.full((30, 5), 1e6)                     # impossible data: every weight underflows
+    run = run_rbpf(system, y, theta * rng.uniform(0.5, 1.7, (20, 5)), np.zeros(16),
+                   1e-10 * np.eye(16), rng, u=np.zeros((30, 2)), scheme="paper")
+    assert np.all(np.isfinite(run.theta_mean)) and np.all(np.isfinite(run.x_mean))
