@@ -30,6 +30,7 @@ from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
 from railpaper.experiments.partial_state_observer_claims import claims_table  # noqa: F401
 from railpaper.models import vertical_10dof as v10
+from railpaper.settling import settled_index
 
 SPEC = ChapterSpec(
     name="partial-state-observer",
@@ -151,13 +152,8 @@ def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float])
 
 def convergence_time_s(t_s: np.ndarray, error: np.ndarray, threshold: np.ndarray) -> float:
     """First time after which ``|error| < threshold`` (every column) to the end; -1 if never."""
-    bad = np.any(np.abs(error) >= threshold, axis=-1)
-    idx = np.flatnonzero(bad)
-    if len(idx) == 0:
-        return float(t_s[0])
-    if idx[-1] == len(t_s) - 1:
-        return -1.0
-    return float(t_s[idx[-1] + 1])
+    index = settled_index(np.all(np.abs(error) < threshold, axis=-1))
+    return -1.0 if index < 0 else float(t_s[index])
 
 
 def predicted_convergence_s(disc: fo.DiscreteFunctionalObserver, t_s, z_true, p) -> float:

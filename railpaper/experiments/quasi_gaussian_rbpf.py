@@ -30,6 +30,7 @@ from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_filter
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
                                         no_progress)
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
+from railpaper.settling import settled_index
 
 P = Parameter
 SPEC = ChapterSpec(
@@ -129,11 +130,8 @@ def convergence_step(estimate: np.ndarray, post_mean: np.ndarray, post_std: np.n
                      n_std: float = 2.0) -> int:
     """First step (1-based) from which |estimate − posterior mean| ≤ n_std · posterior std
     holds until the end; −1 if it fails at the last step."""
-    outside = np.flatnonzero(np.abs(estimate - post_mean) > n_std * post_std)
-    if outside.size == 0:
-        return 1
-    last = int(outside[-1]) + 1                 # 1-based step of the last violation
-    return -1 if last == len(estimate) else last + 1
+    index = settled_index(np.abs(estimate - post_mean) <= n_std * post_std)
+    return -1 if index < 0 else index + 1
 
 
 def first_within(estimate: np.ndarray, truth: float, tolerance: float) -> int:
@@ -145,8 +143,7 @@ def first_within(estimate: np.ndarray, truth: float, tolerance: float) -> int:
 def settling_step(estimate: np.ndarray, tolerance: float) -> int:
     """First step (1-based) from which the estimate stays within ``tolerance`` of its own final
     value (what one reads off a plot as "converged")."""
-    outside = np.flatnonzero(np.abs(estimate - estimate[-1]) > tolerance)
-    return int(outside[-1]) + 2 if outside.size else 1
+    return settled_index(np.abs(estimate - estimate[-1]) <= tolerance) + 1
 
 
 def replicate(p: dict, index: int) -> dict:

@@ -29,6 +29,7 @@ from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, P
                                         no_progress)
 from railpaper.models import lateral_16state as L
 from railpaper.models.linear_toys import EQ18_G, eq18_system, simulate_eq18
+from railpaper.settling import settled_index
 
 P = Parameter
 SPEC = ChapterSpec(
@@ -112,14 +113,8 @@ def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
 def steps_to_within(norm: np.ndarray, tol: float = WITHIN) -> np.ndarray:
     """Per column: first step (1-based) after which |norm − 1| <= tol to the end; -1 if never."""
     ok = np.abs(np.atleast_2d(norm.T).T - 1.0) <= tol
-    out = np.full(ok.shape[1], -1)
-    for j in range(ok.shape[1]):
-        bad = np.nonzero(~ok[:, j])[0]
-        if bad.size == 0:
-            out[j] = 1
-        elif bad[-1] < ok.shape[0] - 1:
-            out[j] = int(bad[-1]) + 2
-    return out
+    index = np.array([settled_index(column) for column in ok.T])
+    return np.where(index < 0, -1, index + 1)
 
 
 # ----------------------------------------------------------------------------- Part 1: toy

@@ -24,6 +24,7 @@ from railpaper.discretise import foh, simulate_foh
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
 from railpaper.models import single_wheelset as sw
+from railpaper.settling import settled_index
 
 SPEC = ChapterSpec(
     name="reduced-order-observer",
@@ -92,12 +93,8 @@ def _validate(params: dict) -> None:
 
 def convergence_time_s(t_s: np.ndarray, error: np.ndarray, threshold: float) -> float:
     """First time after which ``|error| < threshold`` to the end; -1 if never."""
-    outside = np.flatnonzero(np.abs(error) >= threshold)
-    if len(outside) == 0:
-        return float(t_s[0])
-    if outside[-1] == len(error) - 1:
-        return -1.0
-    return float(t_s[outside[-1] + 1])
+    index = settled_index(np.abs(error) < threshold)
+    return -1.0 if index < 0 else float(t_s[index])
 
 
 def _simulate_hertz(vehicle, t_s, q_m, x0, substeps=4):
