@@ -18,6 +18,15 @@ def _block_expm(blocks: np.ndarray) -> np.ndarray:
     return np.stack([expm(b) for b in flat]).reshape(blocks.shape)
 
 
+def _checked(A, B, dt_s: float):
+    """A, B as float arrays, their sizes n, m and the broadcast batch shape; dt_s must be > 0."""
+    if not dt_s > 0:
+        raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    return A, B, A.shape[-1], B.shape[-1], np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+
+
 def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Zero-order-hold discretisation: ``x[k+1] = Phi x[k] + Gamma u[k]``.
 
@@ -38,12 +47,7 @@ def zoh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     Phi : ndarray, shape (..., n, n)
     Gamma : ndarray, shape (..., n, m)
     """
-    if not dt_s > 0:
-        raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-    A = np.asarray(A, dtype=float)
-    B = np.asarray(B, dtype=float)
-    n, m = A.shape[-1], B.shape[-1]
-    batch = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    A, B, n, m, batch = _checked(A, B, dt_s)
     block = np.zeros(batch + (n + m, n + m))
     block[..., :n, :n] = A * dt_s
     block[..., :n, n:] = B * dt_s
@@ -62,12 +66,7 @@ def foh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     -------
     Phi, Gamma0, Gamma1 : ndarray
     """
-    if not dt_s > 0:
-        raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-    A = np.asarray(A, dtype=float)
-    B = np.asarray(B, dtype=float)
-    n, m = A.shape[-1], B.shape[-1]
-    batch = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    A, B, n, m, batch = _checked(A, B, dt_s)
     block = np.zeros(batch + (n + 2 * m, n + 2 * m))
     block[..., :n, :n] = A * dt_s
     block[..., :n, n:n + m] = B * dt_s

@@ -48,7 +48,7 @@ from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
 from railpaper.estimators.particles import (effective_sample_size, gaussian_draws,
                                             gaussian_log_density, multinomial_search_resample,
                                             normalise_log_weights, weighted_mean_cov)
-from railpaper.estimators.rbpf import FilterRun, mixture_moments, run_filter
+from railpaper.estimators.rbpf import FilterRun, initial_bank, mixture_moments, run_filter
 
 WEIGHTINGS = ("ratio", "printed")
 
@@ -86,13 +86,7 @@ class QuasiGaussianRBPF:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         self.system, self.rng, self.weighting = system, rng, weighting
         self.weight_threshold, self.search = float(weight_threshold), bool(search)
-        self.theta = np.array(theta0, dtype=float, ndmin=2)
-        n_particles = self.theta.shape[0]
-        x0, P0 = np.asarray(x0, float), np.asarray(P0, float)
-        self.x = np.broadcast_to(x0, (n_particles, x0.shape[-1])).copy()
-        self.P = np.broadcast_to(P0, (n_particles,) + P0.shape[-2:]).copy()
-        self.log_w = np.full(n_particles, -np.log(n_particles))
-        self.sys = system(self.theta)
+        self.theta, self.x, self.P, self.log_w, self.sys = initial_bank(system, theta0, x0, P0)
 
     def _threshold(self, w: np.ndarray) -> np.ndarray:
         keep = w >= self.weight_threshold / len(w)

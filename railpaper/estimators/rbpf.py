@@ -83,6 +83,22 @@ def mixture_moments(x: np.ndarray, P: np.ndarray, weights: np.ndarray
     return mean, np.sqrt(np.clip(second - mean * mean, 0.0, None))
 
 
+def initial_bank(system: Callable[[np.ndarray], LinearGaussianBatch], theta0, x0, P0):
+    """Step 1 of both filters: the particle bank.
+
+    Returns
+    -------
+    theta : (N, d) parameter particles; x : (N, n) and P : (N, n, n) every particle's Kalman
+    mean and covariance; log_w : (N,) uniform log-weights; sys : ``system(theta)``.
+    """
+    theta = np.array(theta0, dtype=float, ndmin=2)
+    n_particles = theta.shape[0]
+    x0, P0 = np.asarray(x0, float), np.asarray(P0, float)
+    x = np.broadcast_to(x0, (n_particles, x0.shape[-1])).copy()
+    P = np.broadcast_to(P0, (n_particles,) + P0.shape[-2:]).copy()
+    return theta, x, P, np.full(n_particles, -np.log(n_particles)), system(theta)
+
+
 class RaoBlackwellisedPF:
     """Stateful RBPF; call :meth:`step` once per measurement (usable in real time).
 
@@ -123,12 +139,7 @@ class RaoBlackwellisedPF:
         self.system, self.rng, self.scheme = system, rng, scheme
         self.delta, self.move = float(delta), bool(move)
         self.ess_fraction, self.tempering_steps = float(ess_fraction), int(tempering_steps)
-        self.theta = np.array(theta0, dtype=float, ndmin=2)
-        n_particles = self.theta.shape[0]
-        x0, P0 = np.asarray(x0, float), np.asarray(P0, float)
-        self.x = np.broadcast_to(x0, (n_particles, x0.shape[-1])).copy()
-        self.P = np.broadcast_to(P0, (n_particles,) + P0.shape[-2:]).copy()
-        self.log_w = np.full(n_particles, -np.log(n_particles))
+        self.theta, self.x, self.P, self.log_w, self.sys = initial_bank(system, theta0, x0, P0)
         self.log_mask = None if log_mask is None else np.asarray(log_mask, bool)
         if scheme == "working" and offset is None and scale is None:
             z = self.theta.copy()
@@ -138,7 +149,6 @@ class RaoBlackwellisedPF:
             scale = np.where(scale > 0, scale, 1.0)
         self.offset, self.scale = offset, scale
         self.k = 0
-        self.sys = system(self.theta)
 
     def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
