@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import platform
+import re
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-from railpaper.pipeline.chapters import (BOOK_DIR, PipelineError, book_chapters, chapter_spec,
-                                         run_chapter)
+from railpaper.pipeline.chapters import (BOOK_DIR, REPO_DIR, PipelineError, book_chapters,
+                                         chapter_spec, run_chapter)
+from railpaper.pipeline.ledger import write_ledger
 
 MATHJAX_SCRIPT = Path("_static/mathjax/node_modules/mathjax/es5/tex-chtml.js")
+APPENDIX_PAGES = ("reproducibility", "performance")
+KEY_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "control", "filterpy", "numba", "dask",
+                "distributed", "matplotlib", "pandas", "papermill", "jupyter-book")
 
 
 def write_toc(book_dir: Path, chapters: list[str]) -> Path:
@@ -19,10 +25,33 @@ def write_toc(book_dir: Path, chapters: list[str]) -> Path:
     for name in chapters:
         stem = Path(chapter_spec(name).notebook).stem
         lines.append(f"- file: chapters/{name}/{stem}")
-    for page in ("reproducibility",):
+    for page in APPENDIX_PAGES:
         if (book_dir / f"{page}.md").exists():
             lines.append(f"- file: {page}")
     path = book_dir / "_toc.yml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def locked_versions(lock_path: str | Path) -> dict[str, str]:
+    """``{package: version}`` of every ``name==version`` pin in a uv/pip lock file."""
+    pins = re.findall(r"^([A-Za-z0-9_.-]+)==([^ \\\n]+)", Path(lock_path).read_text(), re.M)
+    return {name.lower(): version for name, version in pins}
+
+
+def write_environment(book_dir: Path, lock_path: Path = REPO_DIR / "environment.lock") -> Path:
+    """Write ``_generated/environment.md``: the key packages' pinned versions from the lock."""
+    pins = locked_versions(lock_path)
+    header = Path(lock_path).read_text().splitlines()[:3]
+    python = next((m.group(1) for line in header
+                   if (m := re.search(r"--python-version (\S+)", line))), "see pyproject.toml")
+    lines = ["| package | pinned version |", "|---|---|",
+             f"| python | {python} (this build: {platform.python_version()}) |"]
+    for name in KEY_PACKAGES:
+        lines.append(f"| {name} | {pins.get(name, 'not in the lock')} |")
+    lines += ["", f"{len(pins)} packages are pinned with hashes in `environment.lock`."]
+    path = book_dir / "_generated" / "environment.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -42,13 +71,15 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
     book = Path(book_dir) if book_dir else BOOK_DIR
     if book.resolve() != BOOK_DIR.resolve():
         shutil.copytree(BOOK_DIR, book, dirs_exist_ok=True,
-                        ignore=shutil.ignore_patterns("_build", "chapters", ".*"))
+                        ignore=shutil.ignore_patterns("_build", "chapters", "_generated", ".*"))
     if not (book / MATHJAX_SCRIPT).exists():
         raise PipelineError(f"MathJax is not installed at {book / MATHJAX_SCRIPT}; run `make venv`")
     chapters = book_chapters()
     for name in chapters:
         print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}", file=sys.stderr)
         run_chapter(name, {}, quick, book / "chapters" / name, progress=progress)
+    write_ledger(book, chapters)
+    write_environment(book)
     write_toc(book, chapters)
     jupyter_book = Path(sys.executable).parent / "jupyter-book"
     command = [str(jupyter_book), "build", str(book), "-W", "-n", "--keep-going"]
