@@ -48,7 +48,8 @@ from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
 from railpaper.estimators.particles import (effective_sample_size, gaussian_draws,
                                             gaussian_log_density, multinomial_search_resample,
                                             normalise_log_weights, weighted_mean_cov)
-from railpaper.estimators.rbpf import FilterRun, initial_bank, mixture_moments, run_filter
+from railpaper.estimators.rbpf import (ENGINES, FilterRun, bank_step, initial_bank,
+                                       mixture_moments, run_filter)
 
 WEIGHTINGS = ("ratio", "printed")
 
@@ -77,13 +78,18 @@ class QuasiGaussianRBPF:
         Likelihood weights below ``weight_threshold / N`` are dropped before Eqs. 7–8.
     search : bool
         Perform the search/resampling of step (5).
+    engine : {"compiled", "numpy"}
+        Kalman bank implementation (see :func:`railpaper.estimators.rbpf.bank_step`).
     """
 
     def __init__(self, system: Callable[[np.ndarray], LinearGaussianBatch], theta0, x0, P0,
                  rng: np.random.Generator, *, weighting: str = "ratio",
-                 weight_threshold: float = 0.01, search: bool = True):
+                 weight_threshold: float = 0.01, search: bool = True, engine: str = "compiled"):
         if weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        self.engine = engine
         self.system, self.rng, self.weighting = system, rng, weighting
         self.weight_threshold, self.search = float(weight_threshold), bool(search)
         self.theta, self.x, self.P, self.log_w, self.sys = initial_bank(system, theta0, x0, P0)
@@ -99,8 +105,7 @@ class QuasiGaussianRBPF:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
         n_particles = self.theta.shape[0]
         s = self.sys
-        x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)         # (6): Eqs. 18-19
-        x_post, P_post, loglik, _, _ = update(x_prior, P_prior, y, s.H, s.R)  # (1): Eqs. 3-5
+        x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
         w, log_norm, degenerate = normalise_log_weights(loglik)             # Eq. 6
         ess = effective_sample_size(w)
         w = self._threshold(w)                                              # weight threshold
@@ -117,6 +122,7 @@ class QuasiGaussianRBPF:
         if _same_measurement_model(s, s_new):                               # (4): Eqs. 12-15
             x, P = x_post, P_post            # H, R do not depend on θ: same update as in (1)
         else:
+            x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)
             x, P, _, _, _ = update(x_prior, P_prior, y, s_new.H, s_new.R)
         x_mean, x_std = mixture_moments(x, P, q)
         if self.search:                                                     # (5): Eqs. 16-17

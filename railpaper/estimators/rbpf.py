@@ -35,11 +35,26 @@ from typing import Callable
 import numpy as np
 
 from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.kalman_bank import kalman_step
 from railpaper.estimators.particles import (effective_sample_size, liu_west_move,
                                             normalise_log_weights, systematic_resample,
                                             weighted_mean_cov)
 
 SCHEMES = ("paper", "working")
+ENGINES = ("compiled", "numpy")
+
+
+def bank_step(x, P, system: LinearGaussianBatch, y, u, engine: str):
+    """Predict + update of every particle's Kalman filter: ``(x, P, log-likelihood)``.
+
+    ``engine="compiled"``: the fused kernel of :mod:`railpaper.estimators.kalman_bank`;
+    ``"numpy"``: the textbook :func:`predict` + Joseph-form :func:`update` (the reference).
+    """
+    if engine == "compiled":
+        return kalman_step(x, P, system, y, u)
+    x_prior, P_prior = predict(x, P, system.F, system.Q, system.B, u)
+    x, P, loglik, _, _ = update(x_prior, P_prior, y, system.H, system.R)
+    return x, P, loglik
 
 
 @dataclass
@@ -128,14 +143,19 @@ class RaoBlackwellisedPF:
         the initial cloud; "paper": none).
     log_mask : ndarray of bool, (d,), optional
         Parameters moved in log space (must be positive).
+    engine : {"compiled", "numpy"}
+        Kalman bank implementation (see :func:`bank_step`).
     """
 
     def __init__(self, system: Callable[[np.ndarray], LinearGaussianBatch], theta0, x0, P0,
                  rng: np.random.Generator, *, scheme: str = "paper", delta: float = 0.98,
                  move: bool = True, ess_fraction: float = 0.5, tempering_steps: int = 0,
-                 offset=None, scale=None, log_mask=None):
+                 offset=None, scale=None, log_mask=None, engine: str = "compiled"):
         if scheme not in SCHEMES:
             raise ValueError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        self.engine = engine
         self.system, self.rng, self.scheme = system, rng, scheme
         self.delta, self.move = float(delta), bool(move)
         self.ess_fraction, self.tempering_steps = float(ess_fraction), int(tempering_steps)
@@ -155,8 +175,7 @@ class RaoBlackwellisedPF:
         self.k += 1
         n_particles = self.theta.shape[0]
         s = self.sys
-        x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)           # Step 2.6
-        x, P, loglik, _, _ = update(x_prior, P_prior, y, s.H, s.R)              # Steps 2.1, 2.4
+        x, P, loglik = bank_step(self.x, self.P, s, y, u, self.engine)        # Steps 2.6, 2.1, 2.4
         beta = 1.0
         if self.scheme == "working" and self.k <= self.tempering_steps:
             beta = self.k / self.tempering_steps

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
+from railpaper.batch_expm import zoh_stack
 from railpaper.estimators.kalman import LinearGaussianBatch
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
@@ -157,13 +158,17 @@ def zoh_batch(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np
 
 
 def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray):
-    """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle)."""
+    """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
+
+    The ZOH is the compiled balanced Taylor :func:`railpaper.batch_expm.zoh_stack` (≈ 1e-15
+    relative to :func:`zoh_batch`'s scipy ``expm``, ≈ 50× faster on 1000 particles).
+    """
     A0, Ak = affine_terms(fixed, speed_mps)
     B = input_matrix()
 
     def system(theta: np.ndarray) -> LinearGaussianBatch:
         A = a_of_theta(A0, Ak, theta)
-        F, G = zoh_batch(A, B, dt_s)
+        F, G = zoh_stack(A, B, dt_s)
         return LinearGaussianBatch(F, Q, measurement_matrix(A), R, G)
 
     return system

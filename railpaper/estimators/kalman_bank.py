@@ -1,0 +1,220 @@
+"""Fused, compiled Kalman step for a bank of N filters (one per particle): the RBPF hot path.
+
+Same model and conventions as :mod:`railpaper.estimators.kalman`::
+
+    x_k = F x_{k-1} + B u_k + noise(Q),   y_k = H x_k + noise(R)
+
+One call does the time update, the measurement update and the predictive log-likelihood of every
+filter.  It is written for speed, not generality:
+
+* numba, parallel over blocks of ``BLOCK`` filters (``prange``); inside a block every operation
+  runs over the filters in the innermost loop (structure of arrays), so each scalar formula of a
+  16×16 product becomes one SIMD loop over the block — no Python loop over particles;
+* symmetry: only the upper triangle of ``F P Fᵀ`` and of the posterior is computed;
+* the update uses the whitened gain ``W = L⁻¹ H P⁻`` (``S = L Lᵀ``)::
+
+      x = x⁻ + Wᵀ z,   z = L⁻¹ v       (= x⁻ + K v,  K = P⁻ Hᵀ S⁻¹)
+      P = P⁻ − Wᵀ W                     (= P⁻ − K S Kᵀ, symmetric by construction)
+
+  which costs ≈ 8.5k multiply-adds per filter for n = 16, p = 5 instead of ≈ 16k for the
+  Joseph form of :func:`railpaper.estimators.kalman.update`.  The two agree to rounding on
+  well-conditioned problems (tests/test_kalman_bank.py compares them on random stable systems
+  and on the lateral model); the Joseph form stays the reference.
+
+Per-filter matrices are (N, ·, ·); a shared one is passed as a (1, ·, ·) stack (stride 0 in the
+kernel), so every call has the same compiled signature.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from railpaper.estimators.kalman import LOG_2PI, LinearGaussianBatch
+
+BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
+
+
+@numba.njit(parallel=True, fastmath={"contract"}, cache=True)
+def _kf_step(x, P, F, Q, B, u, H, R, y, x_out, P_out, loglik):  # pragma: no cover - compiled
+    N, n = x.shape
+    p = H.shape[1]
+    m = B.shape[2]
+    sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
+    sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
+    n_blocks = (N + BLOCK - 1) // BLOCK
+    for b in numba.prange(n_blocks):
+        lo = b * BLOCK
+        nb = min(BLOCK, N - lo)
+        Fl = np.empty((n, n, nb))
+        Pl = np.empty((n, n, nb))
+        Hl = np.empty((p, n, nb))
+        xl = np.empty((n, nb))
+        for q in range(nb):
+            for i in range(n):
+                xl[i, q] = x[lo + q, i]
+                for j in range(n):
+                    Fl[i, j, q] = F[(lo + q) * sF, i, j]
+                    Pl[i, j, q] = P[lo + q, i, j]
+            for r in range(p):
+                for j in range(n):
+                    Hl[r, j, q] = H[(lo + q) * sH, r, j]
+        # x⁻ = F x + B u
+        xp = np.zeros((n, nb))
+        for i in range(n):
+            for k in range(n):
+                for q in range(nb):
+                    xp[i, q] += Fl[i, k, q] * xl[k, q]
+            for c in range(m):
+                for q in range(nb):
+                    xp[i, q] += B[(lo + q) * sB, i, c] * u[c]
+        # F P
+        FP = np.zeros((n, n, nb))
+        for i in range(n):
+            for k in range(n):
+                for j in range(n):
+                    for q in range(nb):
+                        FP[i, j, q] += Fl[i, k, q] * Pl[k, j, q]
+        # P⁻ = F P Fᵀ + Q (upper triangle; mirrored when written out)
+        Pp = np.empty((n, n, nb))
+        for i in range(n):
+            for j in range(i, n):
+                for q in range(nb):
+                    Pp[i, j, q] = Q[(lo + q) * sQ, i, j]
+            for k in range(n):
+                for j in range(i, n):
+                    for q in range(nb):
+                        Pp[i, j, q] += FP[i, k, q] * Fl[j, k, q]
+            for j in range(i + 1, n):
+                for q in range(nb):
+                    Pp[j, i, q] = Pp[i, j, q]
+        # H P⁻ (p, n)
+        HP = np.zeros((p, n, nb))
+        for r in range(p):
+            for k in range(n):
+                for j in range(n):
+                    for q in range(nb):
+                        HP[r, j, q] += Hl[r, k, q] * Pp[k, j, q]
+        # S = H P⁻ Hᵀ + R, its Cholesky factor L (lower), v = y − H x⁻
+        S = np.empty((p, p, nb))
+        for r in range(p):
+            for c in range(r, p):
+                for q in range(nb):
+                    S[r, c, q] = R[(lo + q) * sR, r, c]
+            for k in range(n):
+                for c in range(r, p):
+                    for q in range(nb):
+                        S[r, c, q] += HP[r, k, q] * Hl[c, k, q]
+        v = np.empty((p, nb))
+        for r in range(p):
+            for q in range(nb):
+                v[r, q] = y[r]
+            for k in range(n):
+                for q in range(nb):
+                    v[r, q] -= Hl[r, k, q] * xp[k, q]
+        Lc = np.zeros((p, p, nb))
+        logdet = np.zeros(nb)
+        for j in range(p):
+            for q in range(nb):
+                s = S[j, j, q]
+                for k in range(j):
+                    s -= Lc[j, k, q] * Lc[j, k, q]
+                d = math.sqrt(s) if s > 0.0 else math.nan
+                Lc[j, j, q] = d
+                logdet[q] += 2.0 * math.log(d) if s > 0.0 else math.nan
+            for i in range(j + 1, p):
+                for q in range(nb):
+                    s = S[j, i, q]
+                    for k in range(j):
+                        s -= Lc[i, k, q] * Lc[j, k, q]
+                    Lc[i, j, q] = s / Lc[j, j, q]
+        # z = L⁻¹ v ; W = L⁻¹ H P⁻ (forward substitution)
+        z = np.empty((p, nb))
+        W = np.empty((p, n, nb))
+        for r in range(p):
+            for q in range(nb):
+                z[r, q] = v[r, q]
+            for j in range(n):
+                for q in range(nb):
+                    W[r, j, q] = HP[r, j, q]
+            for k in range(r):
+                for q in range(nb):
+                    z[r, q] -= Lc[r, k, q] * z[k, q]
+                for j in range(n):
+                    for q in range(nb):
+                        W[r, j, q] -= Lc[r, k, q] * W[k, j, q]
+            for q in range(nb):
+                z[r, q] /= Lc[r, r, q]
+            for j in range(n):
+                for q in range(nb):
+                    W[r, j, q] /= Lc[r, r, q]
+        # log N(v; 0, S) = −½ (zᵀz + log|S| + p log 2π)
+        for q in range(nb):
+            zz = 0.0
+            for r in range(p):
+                zz += z[r, q] * z[r, q]
+            loglik[lo + q] = -0.5 * (zz + logdet[q] + p * LOG_2PI)
+        # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
+        for i in range(n):
+            for q in range(nb):
+                acc = xp[i, q]
+                for r in range(p):
+                    acc += W[r, i, q] * z[r, q]
+                x_out[lo + q, i] = acc
+        for r in range(p):
+            for i in range(n):
+                for j in range(i, n):
+                    for q in range(nb):
+                        Pp[i, j, q] -= W[r, i, q] * W[r, j, q]
+        for q in range(nb):
+            for i in range(n):
+                for j in range(i, n):
+                    P_out[lo + q, i, j] = Pp[i, j, q]
+                    P_out[lo + q, j, i] = Pp[i, j, q]
+
+
+def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+    """M as a C-contiguous (N, r, c) or (1, r, c) stack (1: shared by every filter)."""
+    if M is None:
+        return np.zeros((1,) + shape)
+    M = np.asarray(M, float)
+    return np.ascontiguousarray(M if M.ndim == 3 else M[None])
+
+
+def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
+                u: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Predict + update of N Kalman filters in one compiled pass.
+
+    Parameters
+    ----------
+    x : ndarray, (N, n)
+        Posterior means at step k−1.
+    P : ndarray, (N, n, n)
+        Posterior covariances at step k−1.
+    system : LinearGaussianBatch
+        F, Q (n, n) or (N, n, n); H (p, n) or (N, p, n); R (p, p) or (N, p, p); B optional.
+    y : ndarray, (p,)
+        Measurement y_k shared by all filters.
+    u : ndarray, (m,), optional
+        Known input u_k.
+
+    Returns
+    -------
+    x_post : (N, n), P_post : (N, n, n), log_likelihood : (N,)
+        ``log N(y; H x⁻, H P⁻ Hᵀ + R)``; NaN where S is not positive definite.
+    """
+    x = np.ascontiguousarray(x, dtype=float)
+    N, n = x.shape
+    p = system.H.shape[-2]
+    B = system.B
+    if B is None or u is None:
+        B, u = None, np.zeros(1)
+    x_out, P_out, loglik = np.empty_like(x), np.empty((N, n, n)), np.empty(N)
+    _kf_step(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
+             _stack(system.Q, (n, n)), _stack(B, (n, 1)), np.asarray(u, float).reshape(-1),
+             _stack(system.H, (p, n)), _stack(system.R, (p, p)),
+             np.ascontiguousarray(y, dtype=float).reshape(-1), x_out, P_out, loglik)
+    return x_out, P_out, loglik
