@@ -4,8 +4,8 @@ Extreme noise levels (R, Q scaled by 1e-12 and 1e12), an ill-conditioned initial
 a deliberately wrong model (data from a strongly unstable system the filters' prior excludes)
 and all-zero likelihoods (every particle's likelihood underflows to 0, or is exactly 0 because
 the squared innovation overflows), on the two small toys of :mod:`railpaper.models.linear_toys`:
-the RBPF (both schemes), the Q-GRBPF (both readings of Eq. 10), the augmented EKF and the
-batched Kalman filter.
+the RBPF (both schemes), the Q-GRBPF (both readings of Eq. 10), each on both Kalman engines
+(compiled bank and numpy), the augmented EKF and the batched Kalman filter.
 """
 
 import numpy as np
@@ -23,10 +23,13 @@ VAR = 0.1                                       # W and V variance of Eq. (18)
 N_STEPS, N_PARTICLES = 30, 60
 
 FILTERS = {
-    "rbpf-paper": (run_rbpf, {"scheme": "paper"}),
-    "rbpf-working": (run_rbpf, {"scheme": "working", "tempering_steps": 10}),
-    "qgrbpf-ratio": (run_qgrbpf, {"weighting": "ratio"}),
-    "qgrbpf-printed": (run_qgrbpf, {"weighting": "printed"}),
+    f"{name}-{engine}": (fn, dict(options, engine=engine))
+    for engine in ("compiled", "numpy")
+    for name, fn, options in (
+        ("rbpf-paper", run_rbpf, {"scheme": "paper"}),
+        ("rbpf-working", run_rbpf, {"scheme": "working", "tempering_steps": 10}),
+        ("qgrbpf-ratio", run_qgrbpf, {"weighting": "ratio"}),
+        ("qgrbpf-printed", run_qgrbpf, {"weighting": "printed"}))
 }
 
 # name: (w_var, v_var, P0, true parameters, offset added to every measurement)
@@ -97,7 +100,7 @@ def test_rbpf_underflow_keeps_the_best_particle():
     """With every likelihood 0 in linear space the log-domain weights still rank the particles:
     the estimate is a weighted mean of the cloud (inside its bounding box), not a NaN."""
     with np.errstate(all="ignore"):
-        run = run_particle_filter("rbpf-working", SCENARIOS["zero likelihoods (underflow)"])
+        run = run_particle_filter("rbpf-working-compiled", SCENARIOS["zero likelihoods (underflow)"])
     assert not run.degenerate[0]
     assert np.all(np.abs(run.theta_mean) < 1e3)
 
