@@ -1,4 +1,4 @@
-"""The ``railpaper`` command: list, run, check, build, track.
+"""The ``railpaper`` command: list, run, check, sweep, build, track.
 
 Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
 no traceback.
@@ -65,6 +65,18 @@ def cmd_check(args) -> int:
     return 0
 
 
+def cmd_sweep(args) -> int:
+    from railpaper.pipeline.sweep import parse_grid_option, run_sweep
+    grid = dict(parse_grid_option(text, _parse_value) for text in args.grid or [])
+    fixed = {name: _parse_value(value) for name, value in args.parameter or []}
+    frame = run_sweep(args.chapter, grid, args.seeds, args.out, fixed=fixed, quick=args.quick,
+                      workers=args.workers, scheduler=args.scheduler)
+    failed = int((frame.status != "ok").sum())
+    print(f"railpaper: sweep of {args.chapter}: {len(frame) - failed} ok, {failed} failed; "
+          f"{args.out / 'results.csv'}, {args.out / 'summary.csv'}")
+    return 1 if failed else 0
+
+
 def cmd_build(args) -> int:
     from railpaper.pipeline.book import build_book
     html = build_book(args.quick, args.book_dir)
@@ -112,6 +124,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("chapters", nargs="*")
     p.add_argument("--out", type=Path, help="run directory to check (one chapter only)")
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("sweep", help="Monte Carlo sweep: grid values x seeds on dask workers")
+    p.add_argument("chapter")
+    p.add_argument("--grid", action="append", metavar="NAME=V1,V2,...",
+                   help="values of one parameter, each YAML (e.g. speeds_kmh=[60],[100])")
+    p.add_argument("-p", "--parameter", nargs=2, action="append", metavar=("NAME", "VALUE"),
+                   help="a parameter fixed for every sample; VALUE is YAML")
+    p.add_argument("--seeds", required=True, help="START:STOP (0:50 = seeds 0..49) or 0,3,7")
+    p.add_argument("--out", type=Path, required=True, help="directory of results.csv, summary.csv")
+    p.add_argument("--quick", action="store_true", help="the chapter's quick sizes")
+    p.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("build", help="run every chapter, then build the book strictly")
     p.add_argument("--quick", action="store_true")
