@@ -189,3 +189,28 @@ def test_repository_claims_all_have_rules(chapter):
     for claim in claims.values():
         assert claim.get("justification"), claim["claim"]
         assert claim["primary"] in claim["metrics"]
+
+
+def test_toc_lists_appendix_pages_that_exist(tmp_path):
+    from railpaper.pipeline.book import write_toc
+    (tmp_path / "reproducibility.md").write_text("# R\n")
+    chapters = book_chapters()
+    toc = write_toc(tmp_path, chapters).read_text().splitlines()
+    assert toc[-1] == "- file: reproducibility" and "- file: performance" not in toc
+    (tmp_path / "performance.md").write_text("# P\n")
+    toc = write_toc(tmp_path, chapters).read_text().splitlines()
+    assert toc[-2:] == ["- file: reproducibility", "- file: performance"]
+    assert len(toc) == 3 + len(chapters) + 2
+
+
+def test_environment_table_matches_the_installed_packages(tmp_path):
+    """The generated table holds the lock's pins; the venv built from the lock has them installed."""
+    from importlib.metadata import version
+
+    from railpaper.pipeline.book import KEY_PACKAGES, REPO_DIR, locked_versions, write_environment
+    pins = locked_versions(REPO_DIR / "environment.lock")
+    text = write_environment(tmp_path).read_text()
+    for name in KEY_PACKAGES:
+        assert f"| {name} | {pins[name]} |" in text
+        assert version(name) == pins[name], name
+    assert "| python | 3.11 " in text
