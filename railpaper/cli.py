@@ -1,4 +1,4 @@
-"""The ``railpaper`` command: list, run, check, sweep, build, track.
+"""The ``railpaper`` command: list, run, check, sweep, build, track, bench.
 
 Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
 no traceback.
@@ -84,6 +84,14 @@ def cmd_build(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from railpaper.pipeline.bench import run_bench
+    run_bench(args.quick, args.out)
+    if args.out:
+        print(f"railpaper: benchmark written to {args.out} (plot beside it)")
+    return 0
+
+
 def cmd_track(args) -> int:
     from railpaper import track
     if args.list:
@@ -142,6 +150,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true")
     p.add_argument("--book-dir", type=Path, help=argparse.SUPPRESS)
     p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("bench", help="RBPF engine benchmark on paper 003's lateral model")
+    p.add_argument("--quick", action="store_true", help="fewer steps, same N (about a minute)")
+    p.add_argument("--out", type=Path, help="write the results as JSON (and a PNG plot beside)")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("track", help="export a synthetic track irregularity profile as CSV")
     p.add_argument("--list", action="store_true", help="name the spectra and components")

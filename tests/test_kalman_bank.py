@@ -61,10 +61,20 @@ def test_kalman_step_matches_textbook_filter_on_random_systems(n, p, m, N, share
         y = y + rng.standard_normal(p)
 
 
-def test_kalman_step_gives_nan_likelihood_not_an_exception_for_indefinite_S():
-    s = LinearGaussianBatch(np.eye(2), np.zeros((2, 2)), np.eye(2), -np.eye(2))
-    _, _, loglik = kalman_step(np.zeros((3, 2)), np.zeros((3, 2, 2)), s, np.ones(2))
-    assert np.all(np.isnan(loglik))
+def test_both_engines_skip_the_update_and_give_minus_inf_where_S_is_not_positive_definite():
+    """Filter 0 is ordinary, filter 1 has R = −I, filter 2 has P⁻ = 0 and R = 0 (S singular)."""
+    rng = np.random.default_rng(2)
+    R = np.stack([np.eye(2), -np.eye(2), np.zeros((2, 2))])
+    P = np.stack([random_spd(rng, 2), random_spd(rng, 2), np.zeros((2, 2))])
+    s = LinearGaussianBatch(np.eye(2), np.zeros((2, 2)), np.eye(2), R)
+    x, y = rng.standard_normal((3, 2)), np.ones(2)
+    for x_post, P_post, loglik in (kalman_step(x, P, s, y), reference_step(x, P, s, y, None)):
+        assert np.all(np.isneginf(loglik[1:])) and np.isfinite(loglik[0])
+        np.testing.assert_array_equal(x_post[1:], x[1:])        # prior kept: F = I, Q = 0
+        np.testing.assert_array_equal(P_post[1:], P[1:])
+        ref = reference_step(x[:1], P[:1], LinearGaussianBatch(np.eye(2), np.zeros((2, 2)),
+                                                               np.eye(2), np.eye(2)), y, None)
+        np.testing.assert_allclose(x_post[0], ref[0][0], rtol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -145,11 +145,16 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.nda
         ``y - H x⁻``.
     S : ndarray
         Innovation covariance ``H P⁻ Hᵀ + R``.
+
+    Where S is not positive definite (e.g. exactly singular: P⁻ = 0 and R = 0) that filter is
+    not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf, as in
+    :func:`railpaper.estimators.kalman_bank.kalman_step`.
     """
     v = np.asarray(y, float) - _mv(H, x)                  # v = y − H x⁻
     HP = H @ P                                            # H P⁻ (= (P⁻ Hᵀ)ᵀ, P⁻ symmetric)
     S = symmetrise(HP @ _mT(H) + R)                       # S = H P⁻ Hᵀ + R
-    L = np.linalg.cholesky(S)                             # S = L Lᵀ
+    S_safe, bad = _positive_definite_or_identity(S)
+    L = np.linalg.cholesky(S_safe)                        # S = L Lᵀ
     n = x.shape[-1]
     batch = np.broadcast_shapes(HP.shape[:-2], v.shape[:-1])
     rhs = np.concatenate([np.broadcast_to(HP, batch + HP.shape[-2:]),
@@ -163,7 +168,32 @@ def update(x: np.ndarray, P: np.ndarray, y: np.ndarray, H: np.ndarray, R: np.nda
     P_post = symmetrise(I_KH @ P @ _mT(I_KH) + K @ R @ _mT(K))  # P = (I−KH)P⁻(I−KH)ᵀ + K R Kᵀ
     log_det = 2.0 * np.sum(np.log(np.diagonal(L, axis1=-2, axis2=-1)), axis=-1)
     log_likelihood = -0.5 * (np.sum(z * z, axis=-1) + log_det + v.shape[-1] * LOG_2PI)
+    if bad is not None:                                   # no update where S is not PD
+        x_post = np.where(bad[..., None], x, x_post)
+        P_post = np.where(bad[..., None, None], P, P_post)
+        log_likelihood = np.where(bad, -np.inf, log_likelihood)
     return x_post, P_post, log_likelihood, v, S
+
+
+def _positive_definite_or_identity(S: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``S`` with every non-positive-definite matrix replaced by I, and the mask of those.
+
+    The mask is None when the whole batch factorises (the usual case: one Cholesky call).
+    """
+    try:
+        np.linalg.cholesky(S)
+        return S, None
+    except np.linalg.LinAlgError:
+        pass
+    stack = S.reshape((-1,) + S.shape[-2:])
+    bad = np.zeros(len(stack), dtype=bool)
+    for i, Si in enumerate(stack):                        # rare path: find the culprits
+        try:
+            np.linalg.cholesky(Si)
+        except np.linalg.LinAlgError:
+            bad[i] = True
+    safe = np.where(bad[:, None, None], np.eye(S.shape[-1]), stack).reshape(S.shape)
+    return safe, bad.reshape(S.shape[:-2])
 
 
 class LinearGaussianBatch:

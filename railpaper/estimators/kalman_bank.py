@@ -116,14 +116,17 @@ def _kf_step(x, P, F, Q, B, u, H, R, y, x_out, P_out, loglik):  # pragma: no cov
                     v[r, q] -= Hl[r, k, q] * xp[k, q]
         Lc = np.zeros((p, p, nb))
         logdet = np.zeros(nb)
+        bad = np.zeros(nb, dtype=np.bool_)        # S not positive definite: no update
         for j in range(p):
             for q in range(nb):
                 s = S[j, j, q]
                 for k in range(j):
                     s -= Lc[j, k, q] * Lc[j, k, q]
-                d = math.sqrt(s) if s > 0.0 else math.nan
-                Lc[j, j, q] = d
-                logdet[q] += 2.0 * math.log(d) if s > 0.0 else math.nan
+                if not s > 0.0:                   # also catches NaN
+                    bad[q] = True
+                    s = 1.0
+                Lc[j, j, q] = math.sqrt(s)
+                logdet[q] += math.log(s)
             for i in range(j + 1, p):
                 for q in range(nb):
                     s = S[j, i, q]
@@ -155,8 +158,14 @@ def _kf_step(x, P, F, Q, B, u, H, R, y, x_out, P_out, loglik):  # pragma: no cov
             zz = 0.0
             for r in range(p):
                 zz += z[r, q] * z[r, q]
-            loglik[lo + q] = -0.5 * (zz + logdet[q] + p * LOG_2PI)
+            loglik[lo + q] = -math.inf if bad[q] else -0.5 * (zz + logdet[q] + p * LOG_2PI)
         # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
+        for q in range(nb):
+            if bad[q]:                            # keep the prior: x = x⁻, P = P⁻
+                for r in range(p):
+                    z[r, q] = 0.0
+                    for j in range(n):
+                        W[r, j, q] = 0.0
         for i in range(n):
             for q in range(nb):
                 acc = xp[i, q]
@@ -204,7 +213,9 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
     Returns
     -------
     x_post : (N, n), P_post : (N, n, n), log_likelihood : (N,)
-        ``log N(y; H x⁻, H P⁻ Hᵀ + R)``; NaN where S is not positive definite.
+        ``log N(y; H x⁻, H P⁻ Hᵀ + R)``.  Where S is not positive definite (e.g. exactly
+        singular) that filter is not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf:
+        a particle the model cannot weigh, never a NaN.
     """
     x = np.ascontiguousarray(x, dtype=float)
     N, n = x.shape

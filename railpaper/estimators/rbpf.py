@@ -92,10 +92,16 @@ class FilterRun:
 
 def mixture_moments(x: np.ndarray, P: np.ndarray, weights: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and per-component std of the Gaussian mixture Σ w_i N(x_i, P_i)."""
+    """Mean and per-component std of the Gaussian mixture Σ w_i N(x_i, P_i).
+
+    Centred and scaled per component, so states of 1e160 do not overflow the squares.
+    """
     mean = weights @ x
-    second = weights @ (np.diagonal(P, axis1=-2, axis2=-1) + x * x)
-    return mean, np.sqrt(np.clip(second - mean * mean, 0.0, None))
+    centred, var = x - mean, np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None)
+    scale = np.maximum(np.abs(centred).max(axis=0), np.sqrt(var.max(axis=0)))
+    scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)   # no overflow in squares
+    spread = weights @ (var / scale ** 2 + (centred / scale) ** 2)   # Σ w (P_ii + (x_i − x̄)²)
+    return mean, scale * np.sqrt(spread)
 
 
 def initial_bank(system: Callable[[np.ndarray], LinearGaussianBatch], theta0, x0, P0):

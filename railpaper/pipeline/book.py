@@ -11,6 +11,7 @@ from pathlib import Path
 
 from railpaper.pipeline.chapters import (BOOK_DIR, REPO_DIR, PipelineError, book_chapters,
                                          chapter_spec, run_chapter)
+from railpaper.pipeline.bench import write_performance
 from railpaper.pipeline.ledger import write_ledger
 
 MATHJAX_SCRIPT = Path("_static/mathjax/node_modules/mathjax/es5/tex-chtml.js")
@@ -80,6 +81,9 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
         run_chapter(name, {}, quick, book / "chapters" / name, progress=progress)
     write_ledger(book, chapters)
     write_environment(book)
+    if (book / "performance.md").exists():
+        print("railpaper: engine benchmark (quick) for the performance page", file=sys.stderr)
+        write_performance(book)
     write_toc(book, chapters)
     jupyter_book = Path(sys.executable).parent / "jupyter-book"
     command = [str(jupyter_book), "build", str(book), "-W", "-n", "--keep-going"]

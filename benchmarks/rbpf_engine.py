@@ -1,0 +1,203 @@
+"""Benchmark of the RBPF engine on paper 003's lateral model (16 states, 5 channels, 1 kHz).
+
+Every number is measured in this process on the same simulated record (the chapter's
+``simulate_lateral`` at its default settings), against baselines run here too:
+
+* ``compiled``: the library's RBPF / Q-GRBPF (numba Kalman bank + balanced Taylor ZOH);
+* ``numpy``: the same filters on the textbook path — stacked ``scipy.linalg.expm`` + numpy
+  predict / Joseph update (``engine="numpy"``);
+* ``filterpy``: :class:`benchmarks.filterpy_rbpf.FilterpyRBPF`, one filterpy filter per particle.
+
+Speed-ups compare the same steps of the same record with the same seed; the estimates of the
+baselines are compared with ours (``max_rel_theta_diff``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from railpaper.estimators.kalman import LinearGaussianBatch
+from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
+from railpaper.estimators.rbpf import RaoBlackwellisedPF
+from railpaper.experiments import rbpf_parameter_estimation as E
+from railpaper.models import lateral_16state as L
+
+from benchmarks.filterpy_rbpf import FilterpyRBPF
+
+
+def lateral_problem(n_steps: int, seed: int = 0) -> dict:
+    """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model."""
+    p = dict(E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False))
+    fixed, theta = E.vehicle()
+    data = E.simulate_lateral(p, fixed, theta, seed)
+    Q, R = E.filter_noise(fixed, theta, p, data["du_var"])
+    v = p["speed_kmh"] / 3.6
+    A0, Ak = L.affine_terms(fixed, v)
+    fast = L.lateral_system(fixed, v, p["dt_s"], Q, R)
+
+    def textbook(th):                          # stacked scipy expm: the straightforward path
+        A = L.a_of_theta(A0, Ak, th)
+        F, G = L.zoh_batch(A, L.input_matrix(), p["dt_s"])
+        return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
+
+    return dict(p=p, theta=theta, y=data["y"], u=data["u"], Q=Q, R=R, A0=A0, Ak=Ak,
+                systems={"compiled": fast, "numpy": textbook})
+
+
+def scheme_options(p: dict, scheme: str) -> dict:
+    if scheme == "paper":
+        return dict(scheme="paper", delta=p["paper_delta"])
+    return dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
+                tempering_steps=p["tempering_steps"], log_mask=np.ones(5, bool))
+
+
+def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
+    """kind: 'rbpf-working', 'rbpf-paper', 'qgrbpf' (+ ':numpy' or ':filterpy' for baselines)."""
+    name, _, engine = kind.partition(":")
+    engine = engine or "compiled"
+    rng = np.random.default_rng(seed)
+    p, theta = prob["p"], prob["theta"]
+    theta0 = theta * rng.uniform(p["prior_low"], p["prior_high"], (N, 5))
+    x0, P0 = np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES)
+    if name == "qgrbpf":
+        return QuasiGaussianRBPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine)
+    opts = scheme_options(p, name.split("-")[1])
+    if engine == "filterpy":
+        return FilterpyRBPF(prob["A0"], prob["Ak"], L.input_matrix(), L.measurement_matrix,
+                            p["dt_s"], prob["Q"], prob["R"], theta0, x0, P0, rng, **opts)
+    return RaoBlackwellisedPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine,
+                              **opts)
+
+
+def time_filter(prob: dict, kind: str, N: int, n_steps: int) -> tuple[float, np.ndarray]:
+    """Seconds per step over steps 1..n_steps of the record, and the θ estimates (K, 5)."""
+    filt = make_filter(prob, kind, N)
+    est = np.empty((n_steps, 5))
+    t0 = time.perf_counter()
+    for k in range(n_steps):
+        out = filt.step(prob["y"][k], prob["u"][k])
+        est[k] = out if isinstance(out, np.ndarray) else out["theta_mean"]
+    return (time.perf_counter() - t0) / n_steps, est
+
+
+def profile_step(prob: dict, N: int, repeats: int) -> dict:
+    """Milliseconds of the parts of one step at N: Kalman bank, ZOH of N particles, the rest."""
+    from railpaper.estimators.kalman_bank import kalman_step
+    filt = make_filter(prob, "rbpf-paper", N)
+    for k in range(3):
+        filt.step(prob["y"][k], prob["u"][k])
+    parts = {}
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        kalman_step(filt.x, filt.P, filt.sys, prob["y"][3], prob["u"][3])
+    parts["kalman_bank_ms"] = (time.perf_counter() - t0) / repeats * 1e3
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        prob["systems"]["compiled"](filt.theta)
+    parts["zoh_all_particles_ms"] = (time.perf_counter() - t0) / repeats * 1e3
+    t0 = time.perf_counter()
+    for k in range(repeats):
+        filt.step(prob["y"][3 + k], prob["u"][3 + k])
+    total = (time.perf_counter() - t0) / repeats * 1e3
+    parts["rest_of_paper_scheme_step_ms"] = total - parts["kalman_bank_ms"] - parts[
+        "zoh_all_particles_ms"]
+    return parts
+
+
+def _peak_rss_mb(N: int, n_steps: int) -> float:
+    """Peak resident memory (MB) of a fresh process that runs the paper-scheme RBPF at N."""
+    code = ("import resource\n"
+            "from benchmarks.rbpf_engine import lateral_problem, time_filter\n"
+            f"time_filter(lateral_problem(400), 'rbpf-paper', {N}, {n_steps})\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)\n")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         check=True, cwd=root)
+    return float(out.stdout.split()[-1])
+
+
+def peak_memory_mb(N: int, n_steps: int) -> dict:
+    """Peak RSS at N and at N = 10 (same script); their difference is what N particles cost."""
+    big, small = _peak_rss_mb(N, n_steps), _peak_rss_mb(10, n_steps)
+    n = L.N_STATES
+    per_particle = (3 * n * n + 2 * n * 5 + 2 * n + 2 * 5 + 5) * 8     # x, P, F, H, G, θ (bytes)
+    return dict(peak_rss_mb=big, peak_rss_N10_mb=small, particles_mb=big - small,
+                bank_arrays_mb=N * per_particle / 2 ** 20)
+
+
+def machine() -> dict:
+    import numba
+    cfg = np.show_config(mode="dicts")
+    blas = cfg.get("Build Dependencies", {}).get("blas", {})
+    cpu = platform.processor()
+    if os.path.exists("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")),
+                       cpu)
+    return dict(cores=os.cpu_count(), cpu=cpu, python=platform.python_version(),
+                numpy=np.__version__, blas=f"{blas.get('name', '?')} {blas.get('version', '')}",
+                numba=numba.__version__, numba_threads=numba.get_num_threads())
+
+
+def main_payload(quick: bool, progress=print) -> dict:
+    """Run the whole benchmark; returns the JSON payload (see railpaper.pipeline.bench)."""
+    sizes = dict(working=200 if quick else 1000, paper=40 if quick else 200,
+                 fp_working=30 if quick else 150, fp_paper=6 if quick else 25)
+    prob = lateral_problem(sizes["working"] + 10)
+    progress("railpaper bench: compiling kernels")
+    time_filter(prob, "rbpf-paper", 70, 3)
+    time_filter(prob, "qgrbpf", 70, 3)
+    rows = []
+    Ns = (100, 1000, 10000) if quick else (100, 300, 1000, 3000, 10000)
+    for N in Ns:
+        scale = max(1, N // 1000)
+        for kind, k in (("rbpf-working", "working"), ("rbpf-paper", "paper"), ("qgrbpf", "paper")):
+            steps = max(5, sizes[k] // scale)
+            progress(f"railpaper bench: {kind} N={N}, {steps} steps")
+            dt, _ = time_filter(prob, kind, N, steps)
+            rows.append(dict(problem="lateral-16", filter=kind, engine="compiled", N=N,
+                             steps=steps, steps_per_s=1 / dt, us_per_particle_step=dt / N * 1e6))
+    N = 1000
+    baselines = {}
+    for kind, k in (("rbpf-working", "fp_working"), ("rbpf-paper", "fp_paper")):
+        steps = sizes[k]
+        dt_ours, est_ours = time_filter(prob, kind, N, steps)
+        for engine in ("numpy", "filterpy"):
+            progress(f"railpaper bench: {kind}:{engine} N={N}, {steps} steps")
+            dt, est = time_filter(prob, f"{kind}:{engine}", N, steps)
+            diff = float(np.max(np.abs(est - est_ours) / np.abs(est_ours)))
+            rows.append(dict(problem="lateral-16", filter=kind, engine=engine, N=N, steps=steps,
+                             steps_per_s=1 / dt, us_per_particle_step=dt / N * 1e6,
+                             speedup_of_compiled=dt / dt_ours, max_rel_theta_diff=diff))
+            baselines[(kind, engine)] = dt / dt_ours
+    progress("railpaper bench: profile and peak memory")
+    prof = profile_step(prob, 1000, 5 if quick else 20)
+    mem = peak_memory_mb(10000, 3)
+
+    def rate(kind, N):
+        return next(r["steps_per_s"] for r in rows
+                    if r["filter"] == kind and r["engine"] == "compiled" and r["N"] == N)
+    ratios = {f"time_ratio_qgrbpf_over_rbpf_N{N}": rate("rbpf-paper", N) / rate("qgrbpf", N)
+              for N in Ns}
+    return dict(
+        steps_per_s_rbpf_lateral_N1000=rate("rbpf-working", 1000),
+        steps_per_s_rbpf_lateral_N1000_paper_scheme=rate("rbpf-paper", 1000),
+        steps_per_s_qgrbpf_lateral_N1000=rate("qgrbpf", 1000),
+        speedup_vs_filterpy_lateral_N1000=baselines[("rbpf-working", "filterpy")],
+        speedup_vs_filterpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "filterpy")],
+        speedup_vs_numpy_lateral_N1000=baselines[("rbpf-working", "numpy")],
+        speedup_vs_numpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "numpy")],
+        **ratios, profile_N1000_ms=prof, memory_N10000=mem, quick=quick, sizes=sizes,
+        machine=machine(), rows=rows)
+
+
+if __name__ == "__main__":
+    print(json.dumps(main_payload("--quick" in sys.argv), indent=1))
