@@ -190,8 +190,8 @@ class _Progress:
                   f"ETA {eta:.0f}s", file=sys.stderr, flush=True)
 
 
-def _check_directory(out: Path, chapter: str, quick: bool) -> None:
-    """Refuse an output directory that holds a sweep of another chapter or mode."""
+def _check_directory(out: Path, chapter: str, quick: bool, fixed: dict[str, Any]) -> None:
+    """Refuse an output directory that holds a sweep of another chapter, mode or fixed values."""
     path = out / "sweep.json"
     if out.exists() and not out.is_dir():
         raise PipelineError(f"--out {out} is a file, not a directory")
@@ -203,6 +203,9 @@ def _check_directory(out: Path, chapter: str, quick: bool) -> None:
         if (previous.get("chapter"), previous.get("quick")) != (chapter, quick):
             raise PipelineError(f"{out} holds a sweep of {previous.get('chapter')} "
                                 f"(quick={previous.get('quick')}); use another --out")
+        if previous.get("fixed", {}) != json.loads(json.dumps(fixed)):
+            raise PipelineError(f"{out} holds a sweep with other fixed parameters "
+                                f"({previous.get('fixed')}); use another --out")
 
 
 def _record(out: Path, chapter: str, quick: bool, grid: dict, fixed: dict, seeds: list[int],
@@ -259,7 +262,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     if workers is not None and workers < 1:
         raise ValueError(f"--workers must be >= 1, got {workers}")
     out = Path(out_dir)
-    _check_directory(out, chapter, quick)
+    _check_directory(out, chapter, quick, fixed)
     samples = [(sample_key(point), point, overrides) for point, overrides in
                _samples(grid, fixed, seeds)]
     keys = {key for key, _, _ in samples}
