@@ -112,7 +112,7 @@ def test_cli_sweep_on_a_cluster(tmp_path, scheduler):
                            "-p", "sweep_speeds_kmh", "[60]", "-p", "side_tables", "false",
                            "--seeds", "0:2", "--out", str(out), "--scheduler", scheduler)
     assert result.returncode == 0, result.stderr[-2000:]
-    assert "railpaper: sweep 4/4 done, 0 failed" in result.stderr
+    assert "railpaper: sweep 4/4 done, 0 failed, ETA 0m00s" in result.stderr
     table = pd.read_csv(out / "results.csv")
     assert table.speeds_kmh.tolist() == ["[60.0]", "[60.0]", "[100.0]", "[100.0]"]
     assert table.convergence_time_s_100kmh.notna().tolist() == [False, False, True, True]
@@ -142,3 +142,16 @@ def test_cli_bad_input_one_line_exit_2(args, message, tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("railpaper: error:"), lines
     assert message in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_refuses_a_directory_of_another_sweep(tmp_path):
+    from railpaper.pipeline.chapters import PipelineError
+    out = tmp_path / "s"
+    out.mkdir()
+    record = {"chapter": CHAPTER, "quick": True, "fixed": dict(FIXED, noise_fraction=0.5)}
+    (out / "sweep.json").write_text(json.dumps(record))
+    with pytest.raises(PipelineError, match="other fixed parameters"):
+        sweep(out, grid={"duration_s": [1.0]})
+    with pytest.raises(PipelineError, match="holds a sweep of"):
+        run_sweep(CHAPTER, {}, "0:1", out, progress=False)            # full, not quick
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.json"]

@@ -173,21 +173,30 @@ def _client(scheduler: str | None, workers: int | None):
 
 
 class _Progress:
-    """``railpaper: sweep 12/50 done, 1 failed, ETA 40s`` on stderr, at most once a second."""
+    """``railpaper: sweep 12/50 done, 1 failed, ETA 1m05s`` on stderr, at most once a second.
 
-    def __init__(self, total: int, enabled: bool):
-        self.total, self.enabled, self.done, self.failed = total, enabled, 0, 0
-        self.started = self.last = time.monotonic()
+    The ETA uses the pace since the first sample finished (the first includes worker start-up).
+    """
+
+    def __init__(self, total: int, already: int, enabled: bool):
+        self.total, self.already, self.enabled = total, already, enabled
+        self.done = self.failed = 0
+        self.started = self.last = self.first = time.monotonic()
 
     def update(self, status: str) -> None:
         self.done += 1
         self.failed += status != "ok"
         now = time.monotonic()
-        if self.enabled and (now - self.last >= 1.0 or self.done == self.total):
+        if self.done == 1:
+            self.first = now
+        if self.enabled and (now - self.last >= 1.0 or self.already + self.done == self.total):
             self.last = now
-            eta = (now - self.started) / self.done * (self.total - self.done)
-            print(f"railpaper: sweep {self.done}/{self.total} done, {self.failed} failed, "
-                  f"ETA {eta:.0f}s", file=sys.stderr, flush=True)
+            pace = ((now - self.first) / (self.done - 1) if self.done > 1
+                    else now - self.started)
+            eta = round(pace * (self.total - self.already - self.done))
+            print(f"railpaper: sweep {self.already + self.done}/{self.total} done, "
+                  f"{self.failed} failed, ETA {eta // 60}m{eta % 60:02d}s",
+                  file=sys.stderr, flush=True)
 
 
 def _check_directory(out: Path, chapter: str, quick: bool, fixed: dict[str, Any]) -> None:
@@ -280,7 +289,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
                   f"{len(samples) - len(todo)} already done", file=sys.stderr, flush=True)
         futures = {client.submit(run_sample, chapter, quick, overrides, pure=False):
                    (key, point) for key, point, overrides in todo}
-        meter = _Progress(len(todo), progress)
+        meter = _Progress(len(samples), len(samples) - len(todo), progress)
         for future in as_completed(futures):
             key, point = futures.pop(future)
             try:
