@@ -5,7 +5,8 @@ A sweep runs every combination of grid values × seeds by calling the chapter's 
 kernel per sample).  Without a scheduler address the workers form a
 ``dask.distributed.LocalCluster`` on this machine (one single-threaded process per core); with
 ``scheduler="tcp://host:port"`` the same futures go to that cluster, whose workers must be able to
-import ``railpaper``.
+import ``railpaper`` (and should run with ``OMP_NUM_THREADS=1``, as dask's nannies set by default,
+for metrics bit-identical to local runs).
 
 Outputs in ``out_dir`` (see :mod:`railpaper.pipeline.sweep_table`): ``results.csv`` (one row per
 sample, rewritten atomically as samples finish, so an interrupted sweep keeps its finished rows and
@@ -166,7 +167,6 @@ def _client(scheduler: str | None, workers: int | None):
             raise PipelineError(f"cannot reach dask scheduler {scheduler!r}: {one_line(exc)}"
                                 ) from None
     n = workers or os.cpu_count() or 1
-    os.environ.update(SINGLE_THREAD_ENV)          # inherited by the spawned worker processes
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address=":0", env=dict(SINGLE_THREAD_ENV))
     return Client(cluster), cluster
