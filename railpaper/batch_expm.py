@@ -140,4 +140,4 @@ def zoh_stack(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | Non
     M[:, :n, :n] = A * dt_s
     M[:, :n, n:] = B * dt_s
     E = expm_stack(M, scale)
-    return E[:, :n, :n], E[:, :n, n:]
+    return np.ascontiguousarray(E[:, :n, :n]), np.ascontiguousarray(E[:, :n, n:])  # copied once
