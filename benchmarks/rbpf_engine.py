@@ -76,14 +76,24 @@ def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
                               **opts)
 
 
-def time_filter(prob: dict, kind: str, N: int, n_steps: int) -> tuple[float, np.ndarray]:
-    """Seconds per step over steps 1..n_steps of the record, and the θ estimates (K, 5)."""
+def time_filter(prob: dict, kind: str, N: int, n_steps: int, per_step: bool = False
+                ) -> tuple[float, np.ndarray]:
+    """Seconds per step over steps 1..n_steps of the record, and the θ estimates (K, 5).
+
+    The library's RBPF runs through ``steps`` (the working scheme then runs its Kalman bank
+    over chunks of steps between resampling events: estimates lag by at most 32 samples);
+    ``per_step=True`` calls ``step`` once per measurement (lag: none).
+    """
     filt = make_filter(prob, kind, N)
-    est = np.empty((n_steps, 5))
+    Y, U = prob["y"][:n_steps], prob["u"][:n_steps]
     t0 = time.perf_counter()
-    for k in range(n_steps):
-        out = filt.step(prob["y"][k], prob["u"][k])
-        est[k] = out if isinstance(out, np.ndarray) else out["theta_mean"]
+    if hasattr(filt, "steps") and not per_step:
+        est = np.array([o["theta_mean"] for o in filt.steps(Y, U)])
+    else:
+        est = np.empty((n_steps, 5))
+        for k in range(n_steps):
+            out = filt.step(Y[k], U[k])
+            est[k] = out if isinstance(out, np.ndarray) else out["theta_mean"]
     return (time.perf_counter() - t0) / n_steps, est
 
 
@@ -112,11 +122,17 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
 
 
 def _peak_rss_mb(N: int, n_steps: int) -> float:
-    """Peak resident memory (MB) of a fresh process that runs the paper-scheme RBPF at N."""
-    code = ("import resource\n"
-            "from benchmarks.rbpf_engine import lateral_problem, time_filter\n"
-            f"time_filter(lateral_problem(400), 'rbpf-paper', {N}, {n_steps})\n"
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)\n")
+    """Peak resident memory (MB) of a fresh process while it runs the paper-scheme RBPF at N.
+
+    The peak is reset (``/proc/self/clear_refs``) after the record is simulated, so it is the
+    filter's peak (plus the interpreter and libraries), not the simulation's.
+    """
+    code = ("from benchmarks.rbpf_engine import lateral_problem, time_filter\n"
+            "prob = lateral_problem(400)\n"
+            "open('/proc/self/clear_refs', 'w').write('5')\n"
+            f"time_filter(prob, 'rbpf-paper', {N}, {n_steps})\n"
+            "status = open('/proc/self/status').read().split('VmHWM:')[1]\n"
+            "print(int(status.split()[0]) / 1024)\n")
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
@@ -166,6 +182,11 @@ def main_payload(quick: bool, progress=print) -> dict:
             rows.append(dict(problem="lateral-16", filter=kind, engine="compiled", N=N,
                              steps=steps, steps_per_s=1 / dt, us_per_particle_step=dt / N * 1e6))
     N = 1000
+    progress(f"railpaper bench: rbpf-working, one step() per measurement, N={N}")
+    dt_step, _ = time_filter(prob, "rbpf-working", N, sizes["working"], per_step=True)
+    rows.append(dict(problem="lateral-16", filter="rbpf-working", engine="compiled, step()",
+                     N=N, steps=sizes["working"], steps_per_s=1 / dt_step,
+                     us_per_particle_step=dt_step / N * 1e6))
     baselines = {}
     for kind, k in (("rbpf-working", "fp_working"), ("rbpf-paper", "fp_paper")):
         steps = sizes[k]
@@ -190,6 +211,7 @@ def main_payload(quick: bool, progress=print) -> dict:
     return dict(
         steps_per_s_rbpf_lateral_N1000=rate("rbpf-working", 1000),
         steps_per_s_rbpf_lateral_N1000_paper_scheme=rate("rbpf-paper", 1000),
+        steps_per_s_rbpf_lateral_N1000_step_api=1 / dt_step,
         steps_per_s_qgrbpf_lateral_N1000=rate("qgrbpf", 1000),
         speedup_vs_filterpy_lateral_N1000=baselines[("rbpf-working", "filterpy")],
         speedup_vs_filterpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "filterpy")],

@@ -11,8 +11,8 @@ from scipy.linalg import expm
 from railpaper.batch_expm import expm_stack, zoh_stack
 from railpaper.discretise import zoh
 from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
-from railpaper.estimators.kalman_bank import kalman_step
-from railpaper.estimators.rbpf import run_rbpf
+from railpaper.estimators.kalman_bank import kalman_run, kalman_step
+from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_rbpf
 from railpaper.models import lateral_16state as L
 
 
@@ -109,9 +109,9 @@ def test_expm_stack_rejects_nan():
         expm_stack(np.full((2, 3, 3), np.nan))
 
 
-@pytest.mark.parametrize("scheme", ["working", "paper"])
-def test_compiled_rbpf_equals_numpy_rbpf_on_the_lateral_model(lateral, scheme):
-    """Same seed, same data: the compiled engine follows the textbook one particle by particle."""
+@pytest.fixture(scope="module")
+def lateral_record(lateral):
+    """``make(scheme) -> (system, ys, u, theta0, options)``: 120 steps of a lateral record."""
     fixed, theta, v, dt = lateral
     rng = np.random.default_rng(5)
     A = L.build_A_direct(fixed, theta, v)
@@ -127,12 +127,55 @@ def test_compiled_rbpf_equals_numpy_rbpf_on_the_lateral_model(lateral, scheme):
         ys.append(H @ x + np.sqrt(np.diag(R)) * rng.standard_normal(5))
     system = L.lateral_system(fixed, v, dt, Q, R)
     theta0 = theta * np.random.default_rng(1).uniform(0.5, 1.7, (48, 5))
-    opts = dict(scheme=scheme, delta=0.9 if scheme == "working" else 0.98)
-    if scheme == "working":
-        opts.update(ess_fraction=0.8, tempering_steps=30, log_mask=np.ones(5, bool))
-    runs = [run_rbpf(system, np.array(ys), theta0, np.zeros(16), 1e-10 * np.eye(16),
+
+    def make(scheme):
+        opts = dict(scheme=scheme, delta=0.9 if scheme == "working" else 0.98)
+        if scheme == "working":
+            opts.update(ess_fraction=0.8, tempering_steps=30, log_mask=np.ones(5, bool))
+        return system, np.array(ys), u, theta0, opts
+    return make
+
+
+@pytest.mark.parametrize("scheme", ["working", "paper"])
+def test_compiled_rbpf_equals_numpy_rbpf_on_the_lateral_model(lateral_record, scheme):
+    """Same seed, same data: the compiled engine follows the textbook one particle by particle."""
+    system, ys, u, theta0, opts = lateral_record(scheme)
+    runs = [run_rbpf(system, ys, theta0, np.zeros(16), 1e-10 * np.eye(16),
                      np.random.default_rng(7), u=u, engine=engine, **opts)
             for engine in ("compiled", "numpy")]
     assert np.array_equal(runs[0].resampled, runs[1].resampled)
     np.testing.assert_allclose(runs[0].theta_mean, runs[1].theta_mean, rtol=1e-9)
     np.testing.assert_allclose(runs[0].x_mean, runs[1].x_mean, rtol=1e-6, atol=1e-12)
+
+
+def test_kalman_run_over_steps_is_bit_identical_to_kalman_step_step_by_step():
+    rng = np.random.default_rng(9)
+    N, n, p, m = 70, 6, 3, 2
+    s = LinearGaussianBatch(np.stack([random_stable(rng, n) for _ in range(N)]), random_spd(rng, n),
+                            rng.standard_normal((N, p, n)), random_spd(rng, p),
+                            rng.standard_normal((N, n, m)))
+    x, P = rng.standard_normal((N, n)), np.stack([random_spd(rng, n) for _ in range(N)])
+    Y, U = rng.standard_normal((7, p)), rng.standard_normal((7, m))
+    x_end, P_end, loglik, x_hist, var_hist = kalman_run(x, P, s, Y, U, record=True)
+    for k in range(7):
+        x, P, ll = kalman_step(x, P, s, Y[k], U[k])
+        assert np.array_equal(ll, loglik[:, k]) and np.array_equal(x, x_hist[:, k])
+        assert np.array_equal(np.diagonal(P, axis1=1, axis2=2), var_hist[:, k])
+    assert np.array_equal(x, x_end) and np.array_equal(P, P_end)
+
+
+def test_chunked_working_rbpf_equals_step_by_step(lateral_record):
+    """RaoBlackwellisedPF.steps (chunks between resampling events) = step() K times."""
+    system, ys, u, theta0, opts = lateral_record("working")
+    opts.update(ess_fraction=0.97, tempering_steps=10)        # resample often
+    a = RaoBlackwellisedPF(system, theta0, np.zeros(16), 1e-10 * np.eye(16),
+                           np.random.default_rng(7), **opts)
+    b = RaoBlackwellisedPF(system, theta0, np.zeros(16), 1e-10 * np.eye(16),
+                           np.random.default_rng(7), **opts)
+    chunked = a.steps(ys, u, max_chunk=16)
+    stepwise = [b.step(ys[k], u[k]) for k in range(len(ys))]
+    assert sum(o["resampled"] for o in stepwise) >= 5          # chunks really get cut back
+    for o1, o2 in zip(chunked, stepwise):
+        for key in o1:
+            assert np.array_equal(o1[key], o2[key], equal_nan=True), key
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.theta, b.theta)

@@ -38,21 +38,21 @@ BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_step(x, P, F, Q, B, u, H, R, y, x_out, P_out, loglik):  # pragma: no cover - compiled
+def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, record
+            ):  # pragma: no cover - compiled
     N, n = x.shape
     p = H.shape[1]
     m = B.shape[2]
+    n_steps = Y.shape[0]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
     n_blocks = (N + BLOCK - 1) // BLOCK
     for b in numba.prange(n_blocks):
         lo = b * BLOCK
         nb = min(BLOCK, N - lo)
-        Fl = np.empty((n, n, nb))
-        Pl = np.empty((n, n, nb))
-        Hl = np.empty((p, n, nb))
+        Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
-        for q in range(nb):
+        for q in range(nb):                       # gather the block once (structure of arrays)
             for i in range(n):
                 xl[i, q] = x[lo + q, i]
                 for j in range(n):
@@ -61,127 +61,136 @@ def _kf_step(x, P, F, Q, B, u, H, R, y, x_out, P_out, loglik):  # pragma: no cov
             for r in range(p):
                 for j in range(n):
                     Hl[r, j, q] = H[(lo + q) * sH, r, j]
-        # x⁻ = F x + B u
-        xp = np.zeros((n, nb))
-        for i in range(n):
-            for k in range(n):
-                for q in range(nb):
-                    xp[i, q] += Fl[i, k, q] * xl[k, q]
-            for c in range(m):
-                for q in range(nb):
-                    xp[i, q] += B[(lo + q) * sB, i, c] * u[c]
-        # F P
-        FP = np.zeros((n, n, nb))
-        for i in range(n):
-            for k in range(n):
-                for j in range(n):
+        xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
+        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
+        z, W = np.empty((p, nb)), np.empty((p, n, nb))
+        logdet, bad = np.empty(nb), np.empty(nb, dtype=np.bool_)
+        for t in range(n_steps):                  # the block stays in cache over the steps
+            # x⁻ = F x + B u
+            xp[:] = 0.0
+            for i in range(n):
+                for k in range(n):
                     for q in range(nb):
-                        FP[i, j, q] += Fl[i, k, q] * Pl[k, j, q]
-        # P⁻ = F P Fᵀ + Q (upper triangle; mirrored when written out)
-        Pp = np.empty((n, n, nb))
-        for i in range(n):
-            for j in range(i, n):
-                for q in range(nb):
-                    Pp[i, j, q] = Q[(lo + q) * sQ, i, j]
-            for k in range(n):
+                        xp[i, q] += Fl[i, k, q] * xl[k, q]
+                for c in range(m):
+                    for q in range(nb):
+                        xp[i, q] += B[(lo + q) * sB, i, c] * U[t, c]
+            # F P
+            FP[:] = 0.0
+            for i in range(n):
+                for k in range(n):
+                    for j in range(n):
+                        for q in range(nb):
+                            FP[i, j, q] += Fl[i, k, q] * Pl[k, j, q]
+            # P⁻ = F P Fᵀ + Q (upper triangle, mirrored); it overwrites Pl
+            for i in range(n):
                 for j in range(i, n):
                     for q in range(nb):
-                        Pp[i, j, q] += FP[i, k, q] * Fl[j, k, q]
-            for j in range(i + 1, n):
-                for q in range(nb):
-                    Pp[j, i, q] = Pp[i, j, q]
-        # H P⁻ (p, n)
-        HP = np.zeros((p, n, nb))
-        for r in range(p):
-            for k in range(n):
-                for j in range(n):
+                        Pl[i, j, q] = Q[(lo + q) * sQ, i, j]
+                for k in range(n):
+                    for j in range(i, n):
+                        for q in range(nb):
+                            Pl[i, j, q] += FP[i, k, q] * Fl[j, k, q]
+                for j in range(i + 1, n):
                     for q in range(nb):
-                        HP[r, j, q] += Hl[r, k, q] * Pp[k, j, q]
-        # S = H P⁻ Hᵀ + R, its Cholesky factor L (lower), v = y − H x⁻
-        S = np.empty((p, p, nb))
-        for r in range(p):
-            for c in range(r, p):
-                for q in range(nb):
-                    S[r, c, q] = R[(lo + q) * sR, r, c]
-            for k in range(n):
+                        Pl[j, i, q] = Pl[i, j, q]
+            # H P⁻ (p, n)
+            HP[:] = 0.0
+            for r in range(p):
+                for k in range(n):
+                    for j in range(n):
+                        for q in range(nb):
+                            HP[r, j, q] += Hl[r, k, q] * Pl[k, j, q]
+            # S = H P⁻ Hᵀ + R (upper triangle), v = y − H x⁻
+            for r in range(p):
                 for c in range(r, p):
                     for q in range(nb):
-                        S[r, c, q] += HP[r, k, q] * Hl[c, k, q]
-        v = np.empty((p, nb))
-        for r in range(p):
-            for q in range(nb):
-                v[r, q] = y[r]
-            for k in range(n):
+                        S[r, c, q] = R[(lo + q) * sR, r, c]
+                for k in range(n):
+                    for c in range(r, p):
+                        for q in range(nb):
+                            S[r, c, q] += HP[r, k, q] * Hl[c, k, q]
+            for r in range(p):
                 for q in range(nb):
-                    v[r, q] -= Hl[r, k, q] * xp[k, q]
-        Lc = np.zeros((p, p, nb))
-        logdet = np.zeros(nb)
-        bad = np.zeros(nb, dtype=np.bool_)        # S not positive definite: no update
-        for j in range(p):
-            for q in range(nb):
-                s = S[j, j, q]
-                for k in range(j):
-                    s -= Lc[j, k, q] * Lc[j, k, q]
-                if not s > 0.0:                   # also catches NaN
-                    bad[q] = True
-                    s = 1.0
-                Lc[j, j, q] = math.sqrt(s)
-                logdet[q] += math.log(s)
-            for i in range(j + 1, p):
+                    v[r, q] = Y[t, r]
+                for k in range(n):
+                    for q in range(nb):
+                        v[r, q] -= Hl[r, k, q] * xp[k, q]
+            # S = L Lᵀ (Cholesky per filter); not positive definite -> no update, −inf
+            logdet[:] = 0.0
+            bad[:] = False
+            for j in range(p):
                 for q in range(nb):
-                    s = S[j, i, q]
+                    s = S[j, j, q]
                     for k in range(j):
-                        s -= Lc[i, k, q] * Lc[j, k, q]
-                    Lc[i, j, q] = s / Lc[j, j, q]
-        # z = L⁻¹ v ; W = L⁻¹ H P⁻ (forward substitution)
-        z = np.empty((p, nb))
-        W = np.empty((p, n, nb))
-        for r in range(p):
-            for q in range(nb):
-                z[r, q] = v[r, q]
-            for j in range(n):
+                        s -= Lc[j, k, q] * Lc[j, k, q]
+                    if not s > 0.0:               # also catches NaN
+                        bad[q] = True
+                        s = 1.0
+                    Lc[j, j, q] = math.sqrt(s)
+                    logdet[q] += math.log(s)
+                for i in range(j + 1, p):
+                    for q in range(nb):
+                        s = S[j, i, q]
+                        for k in range(j):
+                            s -= Lc[i, k, q] * Lc[j, k, q]
+                        Lc[i, j, q] = s / Lc[j, j, q]
+            # z = L⁻¹ v ; W = L⁻¹ H P⁻ (forward substitution)
+            for r in range(p):
                 for q in range(nb):
-                    W[r, j, q] = HP[r, j, q]
-            for k in range(r):
-                for q in range(nb):
-                    z[r, q] -= Lc[r, k, q] * z[k, q]
+                    z[r, q] = v[r, q]
                 for j in range(n):
                     for q in range(nb):
-                        W[r, j, q] -= Lc[r, k, q] * W[k, j, q]
-            for q in range(nb):
-                z[r, q] /= Lc[r, r, q]
-            for j in range(n):
-                for q in range(nb):
-                    W[r, j, q] /= Lc[r, r, q]
-        # log N(v; 0, S) = −½ (zᵀz + log|S| + p log 2π)
-        for q in range(nb):
-            zz = 0.0
-            for r in range(p):
-                zz += z[r, q] * z[r, q]
-            loglik[lo + q] = -math.inf if bad[q] else -0.5 * (zz + logdet[q] + p * LOG_2PI)
-        # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
-        for q in range(nb):
-            if bad[q]:                            # keep the prior: x = x⁻, P = P⁻
-                for r in range(p):
-                    z[r, q] = 0.0
-                    for j in range(n):
-                        W[r, j, q] = 0.0
-        for i in range(n):
-            for q in range(nb):
-                acc = xp[i, q]
-                for r in range(p):
-                    acc += W[r, i, q] * z[r, q]
-                x_out[lo + q, i] = acc
-        for r in range(p):
-            for i in range(n):
-                for j in range(i, n):
+                        W[r, j, q] = HP[r, j, q]
+                for k in range(r):
                     for q in range(nb):
-                        Pp[i, j, q] -= W[r, i, q] * W[r, j, q]
-        for q in range(nb):
+                        z[r, q] -= Lc[r, k, q] * z[k, q]
+                    for j in range(n):
+                        for q in range(nb):
+                            W[r, j, q] -= Lc[r, k, q] * W[k, j, q]
+                for q in range(nb):
+                    z[r, q] /= Lc[r, r, q]
+                for j in range(n):
+                    for q in range(nb):
+                        W[r, j, q] /= Lc[r, r, q]
+            # log N(v; 0, S) = −½ (zᵀz + log|S| + p log 2π)
+            for q in range(nb):
+                zz = 0.0
+                for r in range(p):
+                    zz += z[r, q] * z[r, q]
+                loglik[lo + q, t] = -math.inf if bad[q] else -0.5 * (zz + logdet[q]
+                                                                      + p * LOG_2PI)
+                if bad[q]:                        # keep the prior: x = x⁻, P = P⁻
+                    for r in range(p):
+                        z[r, q] = 0.0
+                        for j in range(n):
+                            W[r, j, q] = 0.0
+            # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
             for i in range(n):
-                for j in range(i, n):
-                    P_out[lo + q, i, j] = Pp[i, j, q]
-                    P_out[lo + q, j, i] = Pp[i, j, q]
+                for q in range(nb):
+                    acc = xp[i, q]
+                    for r in range(p):
+                        acc += W[r, i, q] * z[r, q]
+                    xl[i, q] = acc
+            for r in range(p):
+                for i in range(n):
+                    for j in range(i, n):
+                        for q in range(nb):
+                            Pl[i, j, q] -= W[r, i, q] * W[r, j, q]
+            for i in range(n):
+                for j in range(i + 1, n):
+                    for q in range(nb):
+                        Pl[j, i, q] = Pl[i, j, q]
+            if record:
+                for q in range(nb):
+                    for i in range(n):
+                        x_hist[lo + q, t, i] = xl[i, q]
+                        var_hist[lo + q, t, i] = Pl[i, i, q]
+        for q in range(nb):                       # scatter the block once
+            for i in range(n):
+                x_out[lo + q, i] = xl[i, q]
+                for j in range(n):
+                    P_out[lo + q, i, j] = Pl[i, j, q]
 
 
 def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
@@ -190,6 +199,55 @@ def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
         return np.zeros((1,) + shape)
     M = np.asarray(M, float)
     return np.ascontiguousarray(M if M.ndim == 3 else M[None])
+
+
+def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.ndarray,
+               U: np.ndarray | None = None, record: bool = False):
+    """``K`` consecutive predict + update steps of N Kalman filters with fixed matrices.
+
+    The covariance recursion does not depend on the data, and between parameter moves an
+    RBPF's matrices are fixed, so K steps can run in one call: each block of filters is
+    gathered once and stays in cache over the K steps.  Step by step the arithmetic is the
+    same as K calls of :func:`kalman_step`.
+
+    Parameters
+    ----------
+    x, P : ndarray, (N, n), (N, n, n)
+        Posterior mean and covariance before the first step.
+    system : LinearGaussianBatch
+    Y : ndarray, (K, p)
+        Measurements (shared by the filters).
+    U : ndarray, (K, m), optional
+        Known inputs.
+    record : bool
+        Also return every step's posterior means and variances.
+
+    Returns
+    -------
+    x_post : (N, n), P_post : (N, n, n)
+        After the last step.
+    log_likelihood : (N, K)
+    x_hist, var_hist : (N, K, n)
+        Posterior means and the diagonals of the posterior covariances (``record`` only).
+    """
+    x = np.ascontiguousarray(x, dtype=float)
+    N, n = x.shape
+    Y = np.ascontiguousarray(np.atleast_2d(np.asarray(Y, float)))
+    K = Y.shape[0]
+    p = system.H.shape[-2]
+    B = system.B
+    if B is None or U is None:
+        B, U = None, np.zeros((K, 1))
+    U = np.ascontiguousarray(np.asarray(U, float).reshape(K, -1))
+    x_out, P_out, loglik = np.empty_like(x), np.empty((N, n, n)), np.empty((N, K))
+    hist_shape = (N, K, n) if record else (0, 0, 0)
+    x_hist, var_hist = np.empty(hist_shape), np.empty(hist_shape)
+    _kf_run(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
+            _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, _stack(system.H, (p, n)),
+            _stack(system.R, (p, p)), Y, x_out, P_out, loglik, x_hist, var_hist, record)
+    if record:
+        return x_out, P_out, loglik, x_hist, var_hist
+    return x_out, P_out, loglik
 
 
 def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
@@ -217,15 +275,7 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
         singular) that filter is not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf:
         a particle the model cannot weigh, never a NaN.
     """
-    x = np.ascontiguousarray(x, dtype=float)
-    N, n = x.shape
-    p = system.H.shape[-2]
-    B = system.B
-    if B is None or u is None:
-        B, u = None, np.zeros(1)
-    x_out, P_out, loglik = np.empty_like(x), np.empty((N, n, n)), np.empty(N)
-    _kf_step(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
-             _stack(system.Q, (n, n)), _stack(B, (n, 1)), np.asarray(u, float).reshape(-1),
-             _stack(system.H, (p, n)), _stack(system.R, (p, p)),
-             np.ascontiguousarray(y, dtype=float).reshape(-1), x_out, P_out, loglik)
-    return x_out, P_out, loglik
+    y = np.asarray(y, float).reshape(1, -1)
+    U = None if u is None else np.asarray(u, float).reshape(1, -1)
+    x_out, P_out, loglik = kalman_run(x, P, system, y, U)
+    return x_out, P_out, loglik[:, 0]

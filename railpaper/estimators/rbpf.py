@@ -35,7 +35,7 @@ from typing import Callable
 import numpy as np
 
 from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
-from railpaper.estimators.kalman_bank import kalman_step
+from railpaper.estimators.kalman_bank import kalman_run, kalman_step
 from railpaper.estimators.particles import (effective_sample_size, liu_west_move,
                                             normalise_log_weights, systematic_resample,
                                             weighted_mean_cov)
@@ -92,12 +92,18 @@ class FilterRun:
 
 def mixture_moments(x: np.ndarray, P: np.ndarray, weights: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and per-component std of the Gaussian mixture Σ w_i N(x_i, P_i).
+    """Mean and per-component std of the Gaussian mixture Σ w_i N(x_i, P_i)."""
+    return mixture_moments_var(x, np.diagonal(P, axis1=-2, axis2=-1), weights)
+
+
+def mixture_moments_var(x: np.ndarray, var: np.ndarray, weights: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`mixture_moments` from the components' variances ``var`` (N, n) = diag P_i.
 
     Centred and scaled per component, so states of 1e160 do not overflow the squares.
     """
     mean = weights @ x
-    centred, var = x - mean, np.clip(np.diagonal(P, axis1=-2, axis2=-1), 0.0, None)
+    centred, var = x - mean, np.clip(var, 0.0, None)
     scale = np.maximum(np.abs(centred).max(axis=0), np.sqrt(var.max(axis=0)))
     scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)   # no overflow in squares
     spread = weights @ (var / scale ** 2 + (centred / scale) ** 2)   # Σ w (P_ii + (x_i − x̄)²)
@@ -178,26 +184,76 @@ class RaoBlackwellisedPF:
 
     def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
+        x, P, loglik = bank_step(self.x, self.P, self.sys, y, u, self.engine)  # Steps 2.6, 2.1, 2.4
+        out, w = self._weigh(loglik, x, np.diagonal(P, axis1=-2, axis2=-1))
+        self._finish(w, out["resampled"], x, P)
+        return out
+
+    def steps(self, Y: np.ndarray, U: np.ndarray | None = None, max_chunk: int = 32
+              ) -> list[dict]:
+        """Process measurements ``Y`` (K, p): the same results as K calls of :meth:`step`.
+
+        With the working scheme on the compiled engine, the particles' matrices are fixed
+        between resampling events, so the Kalman bank runs over chunks of steps in one call
+        (:func:`railpaper.estimators.kalman_bank.kalman_run`, bit-identical to step by step);
+        weights, estimates and the resampling test are still evaluated at every step, and a
+        chunk is cut back to the step where resampling happens.  The chunk length adapts:
+        doubled (up to ``max_chunk``) after a chunk without resampling, else the number of
+        steps the last chunk lasted.
+        """
+        Y = np.asarray(Y, float)
+        if self.engine != "compiled" or self.scheme != "working":
+            return [self.step(Y[k], None if U is None else U[k]) for k in range(len(Y))]
+        outputs, k0, chunk = [], 0, 1
+        while k0 < len(Y):
+            Yc = Y[k0:k0 + chunk]
+            Uc = None if U is None else np.asarray(U, float)[k0:k0 + chunk]
+            x_end, P_end, loglik, x_hist, var_hist = kalman_run(self.x, self.P, self.sys, Yc,
+                                                                Uc, record=True)
+            for j in range(len(Yc)):
+                out, w = self._weigh(loglik[:, j], x_hist[:, j], var_hist[:, j])
+                outputs.append(out)
+                if out["resampled"]:
+                    break
+                with np.errstate(divide="ignore"):
+                    self.log_w = np.log(w)
+            if out["resampled"]:
+                if j < len(Yc) - 1:                    # the bank's state after step j
+                    x_end, P_end, _ = kalman_run(self.x, self.P, self.sys, Yc[:j + 1],
+                                                 None if Uc is None else Uc[:j + 1])
+                self._finish(w, True, x_end, P_end)
+                chunk = j + 1
+            else:
+                self.x, self.P = x_end, P_end
+                chunk = min(2 * chunk, max_chunk)
+            k0 += j + 1
+        return outputs
+
+    def _weigh(self, loglik: np.ndarray, x: np.ndarray, var: np.ndarray) -> tuple[dict, np.ndarray]:
+        """Weights, estimates and the resampling decision of step k from its log-likelihoods."""
         self.k += 1
         n_particles = self.theta.shape[0]
-        s = self.sys
-        x, P, loglik = bank_step(self.x, self.P, s, y, u, self.engine)        # Steps 2.6, 2.1, 2.4
         beta = 1.0
         if self.scheme == "working" and self.k <= self.tempering_steps:
             beta = self.k / self.tempering_steps
         w, log_norm, degenerate = normalise_log_weights(self.log_w + beta * loglik)
         theta_mean, theta_cov = weighted_mean_cov(self.theta, w)                # Eq. 17
-        x_mean, x_std = mixture_moments(x, P, w)
+        x_mean, x_std = mixture_moments_var(x, var, w)
         ess = effective_sample_size(w)
-        out = dict(theta_mean=theta_mean, theta_std=np.sqrt(np.diag(theta_cov)),
-                   x_mean=x_mean, x_std=x_std, ess=ess, degenerate=degenerate,
-                   log_evidence=log_norm if beta == 1.0 else np.nan)
         resample = (self.scheme == "paper" or degenerate
                     or ess < self.ess_fraction * n_particles)
-        theta, sys = self.theta, s
+        out = dict(theta_mean=theta_mean, theta_std=np.sqrt(np.diag(theta_cov)),
+                   x_mean=x_mean, x_std=x_std, ess=ess, degenerate=degenerate,
+                   log_evidence=log_norm if beta == 1.0 else np.nan, resampled=resample)
+        return out, w
+
+    def _finish(self, w: np.ndarray, resample: bool, x: np.ndarray, P: np.ndarray) -> None:
+        """Resampling (Step 2.3) and Liu–West move (Step 2.5) after step k's update."""
+        n_particles = self.theta.shape[0]
+        theta, sys = self.theta, self.sys
         if resample:                                                            # Step 2.3
             idx = systematic_resample(w, self.rng)
-            theta, x, P, sys = theta[idx], x[idx], P[idx], s.take(idx)
+            theta, x, P, sys = theta[idx], x[idx], P[idx], sys.take(idx)
             w = np.full(n_particles, 1.0 / n_particles)
         if self.move and (self.scheme == "paper" or resample):                  # Step 2.5
             theta = liu_west_move(theta, w, self.delta, self.rng, self.offset, self.scale,
@@ -206,8 +262,6 @@ class RaoBlackwellisedPF:
         with np.errstate(divide="ignore"):
             self.log_w = np.log(w)
         self.theta, self.x, self.P, self.sys = theta, x, P, sys
-        out["resampled"] = resample
-        return out
 
 
 def stack_steps(outputs: list[dict], theta: np.ndarray, weights: np.ndarray) -> FilterRun:
@@ -223,7 +277,10 @@ def stack_steps(outputs: list[dict], theta: np.ndarray, weights: np.ndarray) -> 
 def run_filter(filt, y: np.ndarray, u: np.ndarray | None = None) -> FilterRun:
     """Run a stateful parameter filter (RBPF or Q-GRBPF) over measurements y (K, p)."""
     y = np.asarray(y, float)
-    outputs = [filt.step(y[k], None if u is None else u[k]) for k in range(len(y))]
+    if hasattr(filt, "steps"):
+        outputs = filt.steps(y, u)
+    else:
+        outputs = [filt.step(y[k], None if u is None else u[k]) for k in range(len(y))]
     return stack_steps(outputs, filt.theta.copy(), np.exp(filt.log_w))
 
 
