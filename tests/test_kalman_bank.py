@@ -179,3 +179,16 @@ def test_chunked_working_rbpf_equals_step_by_step(lateral_record):
         for key in o1:
             assert np.array_equal(o1[key], o2[key], equal_nan=True), key
     assert np.array_equal(a.x, b.x) and np.array_equal(a.theta, b.theta)
+
+
+@pytest.mark.parametrize("weighting", ["ratio", "printed"])
+def test_compiled_qgrbpf_equals_numpy_qgrbpf_on_the_paper004_toy(weighting):
+    from railpaper.estimators.qgrbpf import run_qgrbpf
+    from railpaper.models.linear_toys import paper004_system, simulate_paper004
+    sim = simulate_paper004(-0.7, 1.5, 1e-3, 1e-3, 0.05, 60, np.random.default_rng(4))
+    theta0 = np.random.default_rng(8).uniform([-1.0, 1.0], [0.4, 2.8], (200, 2))
+    runs = [run_qgrbpf(paper004_system(1e-3, 1e-3), sim.y, theta0, np.zeros(2),
+                       0.05 ** 2 * np.eye(2), np.random.default_rng(3), weighting=weighting,
+                       engine=engine) for engine in ("compiled", "numpy")]
+    np.testing.assert_allclose(runs[0].theta_mean, runs[1].theta_mean, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(runs[0].log_evidence, runs[1].log_evidence, rtol=1e-9)
