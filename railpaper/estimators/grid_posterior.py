@@ -1,9 +1,9 @@
 """Exact parameter posterior on a grid, for linear-Gaussian models with static parameters.
 
 For fixed θ the model is linear and Gaussian, so one Kalman filter gives the exact likelihood
-``p(y_1..k | θ) = Π_j N(y_j; H x⁻_j, S_j)``.  Stacking one filter per grid point (batched through
-:mod:`railpaper.estimators.kalman`) and a uniform prior on a box gives the posterior of θ on the
-grid after every step; its mean and standard deviation are integrals evaluated by the midpoint
+``p(y_1..k | θ) = Π_j N(y_j; H x⁻_j, S_j)``.  Stacking one filter per grid point (the compiled
+bank :func:`railpaper.estimators.kalman_bank.kalman_run`, all steps in one call) and a uniform
+prior on a box gives the posterior of θ on the grid after every step; its mean and standard deviation are integrals evaluated by the midpoint
 rule on cell centres (very accurate while the grid spacing is below the posterior std; check
 :attr:`GridPosterior.min_std_over_spacing`).
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from railpaper.estimators.kalman import predict, update
+from railpaper.estimators.kalman_bank import kalman_run
 from railpaper.estimators.particles import normalise_log_weights, weighted_mean_cov
 
 
@@ -52,19 +52,18 @@ def kalman_log_likelihoods(system, y: np.ndarray, theta: np.ndarray, x0, P0,
     -------
     loglik : ndarray, (K, G)
     """
-    return np.array(list(_loglik_steps(system, y, theta, x0, P0, u)))
+    return _loglik_steps(system, y, theta, x0, P0, u)
 
 
-def _loglik_steps(system, y, theta, x0, P0, u):
+def _loglik_steps(system, y, theta, x0, P0, u) -> np.ndarray:
+    """(K, G) log-likelihoods: one compiled Kalman bank over all K steps (fixed matrices)."""
     theta = np.atleast_2d(theta)
     s = system(theta)
     x0, P0 = np.asarray(x0, float), np.asarray(P0, float)
     x = np.broadcast_to(x0, (theta.shape[0], x0.shape[-1]))
     P = np.broadcast_to(P0, (theta.shape[0],) + P0.shape[-2:])
-    for k in range(len(y)):
-        x, P = predict(x, P, s.F, s.Q, s.B, None if u is None else u[k])
-        x, P, loglik, _, _ = update(x, P, y[k], s.H, s.R)
-        yield loglik
+    _, _, loglik = kalman_run(x, P, s, np.asarray(y, float), u)
+    return loglik.T
 
 
 @dataclass
