@@ -28,13 +28,14 @@ TAYLOR = tuple(1.0 / math.factorial(j) for j in range(13))
 
 
 @numba.njit(fastmath={"contract"}, cache=True)
-def _mm(A, B, C):  # pragma: no cover - compiled
-    """C = A @ B on (k, k, nb) stacks (the filters in the last axis)."""
-    k, nb = A.shape[0], A.shape[2]
+def stack_matmul(A, B, C):  # pragma: no cover - compiled
+    """C = A @ B for stacks A (r, k, nb), B (k, c, nb), C (r, c, nb): the matrices' batch axis
+    is the last one, so the innermost loop runs over the batch (one SIMD loop per formula)."""
+    r, k, c, nb = A.shape[0], A.shape[1], B.shape[1], A.shape[2]
     C[:] = 0.0
-    for i in range(k):
+    for i in range(r):
         for l in range(k):
-            for j in range(k):
+            for j in range(c):
                 for q in range(nb):
                     C[i, j, q] += A[i, l, q] * B[l, j, q]
 
@@ -78,18 +79,18 @@ def _expm_stack(M, scale, coef, out):  # pragma: no cover - compiled
         X *= 0.5 ** s                                                     # X / 2^s
         X2, X3, X4 = np.empty_like(X), np.empty_like(X), np.empty_like(X)
         T, U = np.empty_like(X), np.empty_like(X)
-        _mm(X, X, X2)
-        _mm(X2, X, X3)
-        _mm(X2, X2, X4)
+        stack_matmul(X, X, X2)
+        stack_matmul(X2, X, X3)
+        stack_matmul(X2, X2, X4)
         _poly(X, X2, X3, X4, coef[8:13], T)                               # Paterson–Stockmeyer
-        _mm(X4, T, U)
+        stack_matmul(X4, T, U)
         _poly(X, X2, X3, X4, coef[4:8], T)
         T += U
-        _mm(X4, T, U)
+        stack_matmul(X4, T, U)
         _poly(X, X2, X3, X4, coef[0:4], T)
         T += U
         for _ in range(s):                                                # (e^{X/2^s})^(2^s)
-            _mm(T, T, U)
+            stack_matmul(T, T, U)
             T[:] = U
         for q in range(nb):
             for i in range(k):

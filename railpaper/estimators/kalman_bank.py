@@ -32,6 +32,7 @@ import math
 import numba
 import numpy as np
 
+from railpaper.batch_expm import stack_matmul
 from railpaper.estimators.kalman import LOG_2PI, LinearGaussianBatch
 
 BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
@@ -75,13 +76,7 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, r
                 for c in range(m):
                     for q in range(nb):
                         xp[i, q] += B[(lo + q) * sB, i, c] * U[t, c]
-            # F P
-            FP[:] = 0.0
-            for i in range(n):
-                for k in range(n):
-                    for j in range(n):
-                        for q in range(nb):
-                            FP[i, j, q] += Fl[i, k, q] * Pl[k, j, q]
+            stack_matmul(Fl, Pl, FP)              # F P
             # P⁻ = F P Fᵀ + Q (upper triangle, mirrored); it overwrites Pl
             for i in range(n):
                 for j in range(i, n):
@@ -94,13 +89,7 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, r
                 for j in range(i + 1, n):
                     for q in range(nb):
                         Pl[j, i, q] = Pl[i, j, q]
-            # H P⁻ (p, n)
-            HP[:] = 0.0
-            for r in range(p):
-                for k in range(n):
-                    for j in range(n):
-                        for q in range(nb):
-                            HP[r, j, q] += Hl[r, k, q] * Pl[k, j, q]
+            stack_matmul(Hl, Pl, HP)              # H P⁻ (p, n)
             # S = H P⁻ Hᵀ + R (upper triangle), v = y − H x⁻
             for r in range(p):
                 for c in range(r, p):
