@@ -38,6 +38,24 @@ from railpaper.estimators.kalman import LOG_2PI, LinearGaussianBatch
 BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
 
 
+@numba.njit(fastmath={"contract"}, cache=True)
+def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
+    """C = A Bᵀ + D[(lo + q) · d_stride] for a block (batch in the last axis) whose result is
+    known to be symmetric: the upper triangle is computed and mirrored."""
+    r, k, nb = A.shape[0], A.shape[1], A.shape[2]
+    for i in range(r):
+        for j in range(i, r):
+            for q in range(nb):
+                C[i, j, q] = D[(lo + q) * d_stride, i, j]
+        for l in range(k):
+            for j in range(i, r):
+                for q in range(nb):
+                    C[i, j, q] += A[i, l, q] * B[j, l, q]
+        for j in range(i + 1, r):
+            for q in range(nb):
+                C[j, i, q] = C[i, j, q]
+
+
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, record
             ):  # pragma: no cover - compiled
@@ -77,28 +95,10 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, r
                     for q in range(nb):
                         xp[i, q] += B[(lo + q) * sB, i, c] * U[t, c]
             stack_matmul(Fl, Pl, FP)              # F P
-            # P⁻ = F P Fᵀ + Q (upper triangle, mirrored); it overwrites Pl
-            for i in range(n):
-                for j in range(i, n):
-                    for q in range(nb):
-                        Pl[i, j, q] = Q[(lo + q) * sQ, i, j]
-                for k in range(n):
-                    for j in range(i, n):
-                        for q in range(nb):
-                            Pl[i, j, q] += FP[i, k, q] * Fl[j, k, q]
-                for j in range(i + 1, n):
-                    for q in range(nb):
-                        Pl[j, i, q] = Pl[i, j, q]
+            _symmetric_abt(FP, Fl, Q, lo, sQ, Pl)  # P⁻ = F P Fᵀ + Q; it overwrites Pl
             stack_matmul(Hl, Pl, HP)              # H P⁻ (p, n)
-            # S = H P⁻ Hᵀ + R (upper triangle), v = y − H x⁻
-            for r in range(p):
-                for c in range(r, p):
-                    for q in range(nb):
-                        S[r, c, q] = R[(lo + q) * sR, r, c]
-                for k in range(n):
-                    for c in range(r, p):
-                        for q in range(nb):
-                            S[r, c, q] += HP[r, k, q] * Hl[c, k, q]
+            _symmetric_abt(HP, Hl, R, lo, sR, S)  # S = H P⁻ Hᵀ + R
+            # v = y − H x⁻
             for r in range(p):
                 for q in range(nb):
                     v[r, q] = Y[t, r]
