@@ -7,6 +7,9 @@ no traceback.
 from __future__ import annotations
 
 import argparse
+import os
+import re
+import signal
 import sys
 from pathlib import Path
 
@@ -15,10 +18,34 @@ import yaml
 EXIT_USER_ERROR = 2
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors as one line (``railpaper: error: run: ...``) and exit 2."""
+
+    def error(self, message: str):
+        command = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(EXIT_USER_ERROR, f"railpaper: error: {command}{message} (see --help)\n")
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM, turned into the KeyboardInterrupt path (staging removed, outputs kept)."""
+
+
+def _raise_interrupted(signum, frame):  # noqa: ARG001 - signal handler signature
+    raise Interrupted(signum)
+
+
+class _Loader(yaml.SafeLoader):
+    """YAML, plus floats without a dot (``1e-4``, ``2E3``) that YAML 1.1 reads as strings."""
+
+
+_Loader.add_implicit_resolver("tag:yaml.org,2002:float",
+                              re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$"), list("-+0123456789"))
+
+
 def _parse_value(text: str):
     """A ``-p NAME VALUE`` value, parsed as YAML (so ``'[80, 140]'`` is a list)."""
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError:
         return text
 
@@ -37,14 +64,15 @@ def cmd_list(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from railpaper.pipeline.chapters import chapter_spec, run_chapter
+    from railpaper.pipeline.chapters import chapter_spec, resolve_parameters, run_chapter
     overrides = {}
     spec = chapter_spec(args.chapter)
     for name, value in args.parameter or []:
         spec.parameter(name)                                  # unknown name: one line, exit 2
         overrides[name] = _parse_value(value)
-    spec.resolve(overrides, args.quick)                       # wrong type / value: before a kernel
-    out = run_chapter(args.chapter, overrides, args.quick, args.out)
+    resolve_parameters(args.chapter, overrides, args.quick)   # wrong type / value: before a kernel
+    out = run_chapter(args.chapter, overrides, args.quick, args.out,
+                      progress=sys.stderr.isatty())           # no progress bar in logs
     print(f"railpaper: chapter {args.chapter} written to {out}")
     return 0
 
@@ -53,6 +81,8 @@ def cmd_check(args) -> int:
     from railpaper.pipeline.chapters import book_chapters, chapter_spec
     from railpaper.pipeline.check import check_chapter, format_rows
     chapters = args.chapters or book_chapters()
+    if args.out is not None and len(chapters) != 1:
+        raise ValueError("check --out DIR needs exactly one chapter name")
     rows = []
     for name in chapters:
         chapter_spec(name)
@@ -65,10 +95,22 @@ def cmd_check(args) -> int:
     return 0
 
 
+def _validate_sweep(chapter: str, grid: dict, fixed: dict, quick: bool) -> None:
+    """Every grid combination through the chapter's checks, before any worker starts (a sample
+    failing at run time is recorded in results.csv; a non-physical input is the user's error)."""
+    import itertools
+
+    from railpaper.pipeline.chapters import resolve_parameters
+    lists = [v if isinstance(v, list) else [v] for v in grid.values()]
+    for values in itertools.product(*lists):
+        resolve_parameters(chapter, dict(fixed, **dict(zip(grid, values))), quick)
+
+
 def cmd_sweep(args) -> int:
     from railpaper.pipeline.sweep import parse_grid_option, run_sweep
     grid = dict(parse_grid_option(text, _parse_value) for text in args.grid or [])
     fixed = {name: _parse_value(value) for name, value in args.parameter or []}
+    _validate_sweep(args.chapter, grid, fixed, args.quick)
     frame = run_sweep(args.chapter, grid, args.seeds, args.out, fixed=fixed, quick=args.quick,
                       workers=args.workers, scheduler=args.scheduler)
     failed = int((frame.status != "ok").sum())
@@ -86,6 +128,13 @@ def cmd_build(args) -> int:
 
 def cmd_bench(args) -> int:
     from railpaper.pipeline.bench import run_bench
+    if args.out is not None:                      # refuse before a minute of benchmarking
+        if args.out.suffix != ".json":
+            raise ValueError(f"bench --out {args.out}: expected a .json file name")
+        folder = args.out.parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK) or args.out.is_dir():
+            raise ValueError(f"bench --out {args.out}: cannot write there (no such writable "
+                             "directory, or a directory of that name)")
     run_bench(args.quick, args.out)
     if args.out:
         print(f"railpaper: benchmark written to {args.out} (plot beside it)")
@@ -106,6 +155,8 @@ def cmd_track(args) -> int:
         method=args.method)
     frame = track.profile_frame(distance, profile)
     output = Path(args.output)
+    if not output.parent.is_dir() or output.is_dir():
+        raise ValueError(f"track -o {output}: no such directory to write into, or a directory")
     tmp = output.with_name(f".{output.name}.tmp")
     frame.to_csv(tmp, index=False, float_format="%.17g")
     tmp.replace(output)
@@ -114,7 +165,7 @@ def cmd_track(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="railpaper", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="railpaper", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("list", help="chapters with their parameters, defaults and meaning")
@@ -178,15 +229,23 @@ def main(argv: list[str] | None = None) -> int:
     from railpaper.pipeline.chapters import PipelineError
 
     args = build_parser().parse_args(argv)
+    previous_handler = signal.signal(signal.SIGTERM, _raise_interrupted)
     try:
         return args.func(args)
     except (ParameterError, DataError, PipelineError, ValueError, OSError) as exc:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"railpaper: error: {message}", file=sys.stderr)
         return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print("railpaper: interrupted; previous outputs left untouched", file=sys.stderr)
-        return 130
+    except MemoryError:
+        print("railpaper: error: out of memory; use smaller sizes", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt as exc:
+        signum = exc.args[0] if isinstance(exc, Interrupted) else signal.SIGINT
+        print(f"railpaper: error: interrupted by {signal.Signals(signum).name}; previous outputs "
+              "left untouched", file=sys.stderr)
+        return 128 + signum
+    finally:
+        signal.signal(signal.SIGTERM, previous_handler)
 
 
 if __name__ == "__main__":

@@ -41,6 +41,10 @@ SPECTRA = ("fra-1", "fra-2", "fra-3", "fra-4", "fra-5", "fra-6",
 COMPONENTS = ("vertical", "alignment")
 METHODS = ("ifft", "harmonic")
 
+#: Most samples one profile may have: the ifft method holds a few float64/complex arrays of this
+#: length (about 2 GB at this size), so a longer request is refused rather than exhausting memory.
+MAX_PROFILE_SAMPLES = 50_000_000
+
 #: Factor multiplying the FRA formula: 1.0 = the formula is a one-sided PSD (Zhai's reading).
 FRA_SIDEDNESS_FACTOR = 1.0
 
@@ -301,6 +305,8 @@ def synthesize_profile(spectrum: str, component: str, length_m: float, dx_m: flo
         raise ValueError(_one_of("method", method, METHODS))
     if seed is None:
         raise ValueError("seed must be given explicitly (an int) for a reproducible profile")
+    if isinstance(seed, (int, np.integer)) and seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed}")
     for label, v in (("length_m", length_m), ("dx_m", dx_m)):
         if not (isinstance(v, (int, float, np.floating, np.integer)) and math.isfinite(v) and v > 0):
             raise ValueError(f"{label} must be a finite number > 0, got {v!r}")
@@ -314,6 +320,9 @@ def synthesize_profile(spectrum: str, component: str, length_m: float, dx_m: flo
         raise ValueError(f"wavelength_max_m = {hi} m exceeds length_m = {length_m} m;"
                          f" use length_m >= {hi} m")
     n = int(math.floor(length_m / dx_m + 1e-9)) + 1
+    if n > MAX_PROFILE_SAMPLES:
+        raise ValueError(f"length_m / dx_m = {n - 1:.3g} samples is more than "
+                         f"{MAX_PROFILE_SAMPLES:.0e}; use a shorter length_m or a larger dx_m")
     distance = np.arange(n) * float(dx_m)
     omega_lo, omega_hi = 2 * np.pi / hi, 2 * np.pi / lo
     rng = np.random.default_rng(seed)

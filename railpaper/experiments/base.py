@@ -23,6 +23,7 @@ from __future__ import annotations
 import difflib
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -55,6 +56,9 @@ class Parameter:
         Numbers (or every list element) must be > 0.
     minimum : float, optional
         Numbers (or every list element) must be >= minimum.
+    path : bool
+        A ``str`` naming a file: a non-empty value is made absolute against the caller's working
+        directory (the notebook kernel runs in a staging directory, elsewhere).
     """
 
     name: str
@@ -64,6 +68,7 @@ class Parameter:
     quick: Any = None
     positive: bool = False
     minimum: float | None = None
+    path: bool = False
 
     def coerce(self, value: Any) -> Any:
         """Check and convert a user value; raise :class:`ParameterError` with one line."""
@@ -94,7 +99,7 @@ class Parameter:
         if self.type == "str":
             if not isinstance(value, str):
                 raise ParameterError(f"parameter '{self.name}' expects a string, got {value!r}")
-            return value
+            return str(Path(value).expanduser().resolve()) if self.path and value else value
         if self.type in ("list[float]", "list[int]"):
             if not isinstance(value, (list, tuple)) or len(value) == 0:
                 raise ParameterError(
@@ -175,6 +180,28 @@ def check_metrics(metrics: dict[str, Any]) -> dict[str, float | int | bool]:
             raise ValueError(f"metric '{key}' is {value}; use -1 for 'never happened'")
         clean[key] = value
     return clean
+
+
+#: Largest dt_s·|λ_max| a chapter accepts: a sample time longer than π/|λ| of the continuous
+#: model's fastest mode λ samples an oscillatory mode below its Nyquist rate (|Im λ| ≤ |λ|), so the
+#: discrete model aliases it onto a slower one, and lets a real mode decay to e^-π ≈ 4 % within one
+#: step, so consecutive samples say next to nothing about its rate (the parameters behind it).
+MAX_STEP_PHASE_RAD = math.pi
+
+
+def check_sample_time(name: str, dt_s: float, A: np.ndarray, model: str,
+                      bound: float = MAX_STEP_PHASE_RAD) -> None:
+    """Refuse a sample time too long for the fastest mode of the continuous model ``A``.
+
+    Raises :class:`ParameterError` (one line naming the mode and the bound) when
+    ``dt_s * max|eig(A)| > bound`` (default π, see :data:`MAX_STEP_PHASE_RAD`).
+    """
+    fastest = float(np.max(np.abs(np.linalg.eigvals(A))))
+    if dt_s * fastest > bound:
+        raise ParameterError(
+            f"parameter '{name}' = {dt_s:g} s is too coarse for the fastest mode of {model} "
+            f"(|λ| = {fastest:.0f} 1/s): need {name}·|λ_max| ≤ {bound:.3g}, i.e. "
+            f"{name} ≤ {bound / fastest:.3g} s")
 
 
 ProgressCallback = Callable[[float, str], None]

@@ -84,7 +84,8 @@ PROFILE_DX_M = 0.05
 ESTIMATORS = ("paper", "hb0", "kalman", "q")
 
 
-def _validate(p: dict) -> None:
+def validate(p: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
     if p["beta"] <= 1.0:
         raise ParameterError(f"parameter 'beta' must be > 1 (a strip α ≤ −Re λ ≤ βα), got {p['beta']}")
     if not 1 <= p["track_class"] <= 6:
@@ -283,7 +284,7 @@ def alpha_sweep(ctx: _Context, p: dict, truths: dict) -> pd.DataFrame:
 def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
     """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`."""
     p = params
-    _validate(p)
+    validate(p)
     progress = progress or (lambda fraction, message: None)
     started = time.perf_counter()
     ctx = _Context(p)

@@ -83,7 +83,8 @@ FILTERS = ("rbpf", "rbpf_working", "qgrbpf", "qgrbpf_printed")
 PARAMS = ("a", "b")
 
 
-def _validate(p: dict) -> None:
+def validate(p: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
     if not p["a_min"] < p["a_true"] < p["a_max"]:
         raise ParameterError(f"a_true={p['a_true']} must lie inside the prior box "
                              f"({p['a_min']}, {p['a_max']})")
@@ -297,7 +298,7 @@ def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
     """Run the chapter: main record, Monte Carlo over records, computing times."""
     progress = progress or no_progress
     p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
-    _validate(p)
+    validate(p)
     start = time.perf_counter()
     main = replicate(p, 0)
     rows = [dict(replicate=0, **_record_metrics(p, main))]

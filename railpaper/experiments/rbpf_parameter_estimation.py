@@ -26,7 +26,7 @@ from railpaper.estimators.crlb import crlb_std, fisher_information
 from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
 from railpaper.estimators.rbpf import run_rbpf
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
-                                        no_progress)
+                                        check_sample_time, no_progress)
 from railpaper.models import lateral_16state as L
 from railpaper.models.linear_toys import EQ18_G, eq18_system, simulate_eq18
 from railpaper.settling import settled_index
@@ -95,7 +95,8 @@ SPEC = ChapterSpec(
           minimum=10),
         P("measurements_csv", "", "str",
           "user CSV (t_s, acc_w1_mps2, acc_w2_mps2, acc_b_mps2, acc_bd_mps2, yawrate_b_radps"
-          "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate"),
+          "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate",
+          path=True),
     ],
 )
 
@@ -251,23 +252,30 @@ def read_measurements(path: str, p: dict) -> dict:
         raise ParameterError(f"measurements_csv: missing column(s) {missing}; need t_s, "
                              f"{', '.join(L.CHANNELS)} and optionally {', '.join(CSV_INPUT)}")
     cols = ["t_s", *L.CHANNELS, *[c for c in CSV_INPUT if c in frame.columns]]
-    arr = frame[cols].to_numpy(float)
-    if len(arr) < 10 or not np.all(np.isfinite(arr)):
-        raise ParameterError("measurements_csv: need >= 10 rows of finite numbers")
+    arr = frame[cols].apply(pd.to_numeric, errors="coerce").to_numpy(float)
+    if len(arr) < 10:
+        raise ParameterError(f"measurements_csv: need >= 10 rows, got {len(arr)}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise ParameterError(f"measurements_csv: column {cols[col]} has a NaN, infinite or "
+                             f"non-numeric value in data row {row + 1}")
     dt = np.diff(arr[:, 0])
+    if np.any(dt <= 0):
+        raise ParameterError(f"measurements_csv: t_s is not increasing (data row "
+                             f"{int(np.argmax(dt <= 0)) + 2})")
     if np.any(np.abs(dt - p["dt_s"]) > 1e-6 * p["dt_s"] + 1e-9):
         raise ParameterError(f"measurements_csv: t_s must step uniformly by dt_s = {p['dt_s']} s")
     has_u = all(c in frame.columns for c in CSV_INPUT)
-    u = frame[list(CSV_INPUT)].to_numpy(float) if has_u else None
+    u = arr[:, 6:8] if has_u else None
     y = arr[:, 1:6]
     u_var = np.var(np.diff(u, axis=0), axis=0) if has_u else np.full(2, 0.04 ** 2)
     return dict(y=y, u=None if u is None else np.vstack([u[:1], u[:-1]]), du_var=u_var,
                 dq_var=u_var)
 
 
-def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
-    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`)."""
-    progress = progress or no_progress
+def validate(p: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
     if not p["prior_low"] < 1.0 < p["prior_high"]:
         raise ParameterError("prior_low < 1 < prior_high is needed (the box must hold the truth)")
     if not 1 / 3 < p["paper_delta"] <= 1 or not 1 / 3 < p["working_delta"] <= 1:
@@ -276,9 +284,21 @@ def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
         raise ParameterError("wavelength_min_m is shorter than the filter's Nyquist wavelength "
                              "2 V dt_s")
     if p["spectrum"] not in track.SPECTRA:
-        raise ParameterError(f"spectrum must be one of {list(track.SPECTRA)}")
+        raise ParameterError(f"parameter 'spectrum': unknown spectrum {p['spectrum']!r}; "
+                             f"one of {', '.join(track.SPECTRA)}")
     if p["ess_fraction"] > 1:
         raise ParameterError("ess_fraction must be <= 1")
+    fixed, theta = vehicle()
+    check_sample_time("dt_s", p["dt_s"], L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6),
+                      f"the lateral model at {p['speed_kmh']:g} km/h")
+    if p["measurements_csv"]:
+        read_measurements(p["measurements_csv"], p)
+
+
+def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
+    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`)."""
+    progress = progress or no_progress
+    validate(p)
     metrics, timings, data_out = {}, {}, {}
     fixed, theta = vehicle()
     v = p["speed_kmh"] / 3.6

@@ -80,7 +80,8 @@ NOISE_SWEEP_FRACTIONS = (0.0, 1e-5, 1e-4, 1e-3, 1e-2)
 FRA_BAND_M = (1.524, 304.8)
 
 
-def _validate(params: dict) -> None:
+def validate(params: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
     if params["plant"] not in ("linear", "hertz"):
         raise ParameterError(f"parameter 'plant' must be 'linear' or 'hertz', got {params['plant']!r}")
     if params["observer_form"] not in ("paper", "foh"):
@@ -178,7 +179,7 @@ def _label(speed_kmh: float) -> str:
 
 def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
     """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`."""
-    _validate(params)
+    validate(params)
     progress = progress or (lambda fraction, message: None)
     started = time.perf_counter()
     vehicle = sw.load_parameters()

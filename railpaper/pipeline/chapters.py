@@ -34,6 +34,17 @@ def chapter_spec(name: str) -> ChapterSpec:
     return load_chapter(name).SPEC
 
 
+def resolve_parameters(name: str, overrides: dict | None = None, quick: bool = False) -> dict:
+    """A chapter's checked parameters: types and ranges (:meth:`ChapterSpec.resolve`), then the
+    chapter's own ``validate`` (consistency, sample time, input files) — before any kernel."""
+    spec = chapter_spec(name)
+    params = spec.resolve(overrides or {}, quick)
+    validate = getattr(load_chapter(name), "validate", None)
+    if validate is not None:
+        validate(params)
+    return params
+
+
 def book_chapters() -> list[str]:
     """Chapters with both an experiment module and a notebook, in book order."""
     return [name for name in available_chapters()
@@ -80,6 +91,20 @@ def chapter_lock(out_dir: Path):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+def _logging_kernel_manager(log_path: Path):
+    """A kernel manager class whose kernel writes its stderr to ``log_path``, not to ours: an
+    interrupted run ends in one line, not in the kernel's tracebacks about closed sockets."""
+    from jupyter_client import AsyncKernelManager
+
+    class LoggingKernelManager(AsyncKernelManager):
+        async def start_kernel(self, **kw):
+            with open(log_path, "w") as log:           # the child keeps its own copy of the fd
+                kw.setdefault("stderr", log)
+                return await super().start_kernel(**kw)
+
+    return LoggingKernelManager
+
+
 def hide_parameter_cells(notebook_path: Path) -> None:
     """Tag papermill's parameter cells ``remove-cell`` so the book shows the parameter table the
     notebook prints instead of raw assignments with a staging path."""
@@ -99,7 +124,8 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
 
     Parameters are checked before any kernel starts.  The notebook runs in a staging directory
     beside ``out_dir``; on success the staging directory replaces ``out_dir``, on failure
-    (error, interrupt) it is removed and the previous good outputs stay untouched.
+    (error, interrupt) it is removed and the previous good outputs stay untouched.  The kernel's
+    stderr goes to ``.<out_dir name>.kernel.log`` beside ``out_dir``.
 
     Returns
     -------
@@ -110,9 +136,15 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
     import papermill
 
     spec = chapter_spec(name)
-    params = spec.resolve(overrides or {}, quick)
+    params = resolve_parameters(name, overrides, quick)
     out = Path(out_dir) if out_dir else default_output_dir(name)
     out = out.resolve()
+    if out.exists() and not out.is_dir():
+        raise PipelineError(f"--out {out} is a file, not a directory")
+    if out.is_dir() and any(out.iterdir()) and not (out / "metrics.json").exists():
+        # the swap replaces out_dir as a whole: never a directory that holds something else
+        raise PipelineError(f"--out {out} holds files but no previous run (no metrics.json); "
+                            "use a new or empty directory")
     source = NOTEBOOK_DIR / spec.notebook
     if not source.exists():
         raise PipelineError(f"notebook {source} is missing")
@@ -126,7 +158,8 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                 str(source), str(staging / spec.notebook),
                 parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
                 kernel_name=kernel, cwd=str(staging), progress_bar=progress,
-                request_save_on_cell_execute=False)
+                request_save_on_cell_execute=False,
+                kernel_manager_class=_logging_kernel_manager(out.parent / f".{out.name}.kernel.log"))
             if not (staging / "metrics.json").exists():
                 raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
             hide_parameter_cells(staging / spec.notebook)

@@ -66,13 +66,28 @@ def _claims_by_metric(chapter: str) -> dict[str, str]:
     return out
 
 
+def read_metrics(path: Path, chapter: str) -> dict:
+    """A run's metrics.json, or a one-line :class:`DataError` if it is not one of ``chapter``."""
+    try:
+        run = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{path}: corrupt metrics.json ({exc}); re-run the chapter") from None
+    if not isinstance(run, dict) or not isinstance(run.get("metrics"), dict):
+        raise DataError(f"{path}: corrupt metrics.json (no 'metrics' table); re-run the chapter")
+    if run.get("chapter") != chapter:
+        raise DataError(f"{path} holds a run of {run.get('chapter')!r}, not of {chapter!r}")
+    return run
+
+
 def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[CheckRow]:
     """Rows of the check table for one chapter's last run."""
     spec = chapter_spec(chapter)
     path = Path(out_dir or default_output_dir(chapter)) / "metrics.json"
     if not path.exists():
+        if out_dir is not None:                   # the user named a run directory: it must hold one
+            raise DataError(f"{path} not found: no run of {chapter} in {out_dir}")
         return [CheckRow(chapter, "-", "-", "-", f"no run: {path} missing")]
-    run = json.loads(path.read_text())
+    run = read_metrics(path, chapter)
     quick = bool(run.get("quick"))
     if run.get("parameters") != spec.resolve({}, quick):
         return [CheckRow(chapter, "-", "-", "-",
@@ -85,8 +100,10 @@ def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[Check
         band = f"[{low:g}, {high:g}]"
         if value is None:
             status = "FAIL (missing)"
-        else:
+        elif isinstance(value, (bool, int, float)):
             status = "ok" if low <= float(value) <= high else "FAIL"
+        else:
+            status = "FAIL (not a number)"
         rows.append(CheckRow(chapter, metric, value, band, status, claim_text.get(metric, "")))
     return rows
 
