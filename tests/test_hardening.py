@@ -403,3 +403,13 @@ def test_sample_time_bound_against_an_oscillator():
         check_sample_time("dt_s", 0.0101, A, "an oscillator")
     with pytest.raises(ParameterError, match="too coarse"):       # a real mode of 1000 1/s
         check_sample_time("dt_s", 0.004, np.array([[-1000.0]]), "a fast real mode")
+
+
+def test_measurements_csv_is_read_where_the_user_is(tmp_path, monkeypatch):
+    """A relative measurements_csv names a file in the caller's directory, not in the kernel's
+    staging directory: resolving the parameters makes it absolute (empty stays empty)."""
+    from railpaper.experiments import rbpf_parameter_estimation as chapter
+    monkeypatch.chdir(tmp_path)
+    params = chapter.SPEC.resolve({"measurements_csv": "record.csv"}, quick=True)
+    assert params["measurements_csv"] == str((tmp_path / "record.csv").resolve())
+    assert chapter.SPEC.resolve({}, quick=True)["measurements_csv"] == ""
