@@ -413,3 +413,26 @@ def test_measurements_csv_is_read_where_the_user_is(tmp_path, monkeypatch):
     params = chapter.SPEC.resolve({"measurements_csv": "record.csv"}, quick=True)
     assert params["measurements_csv"] == str((tmp_path / "record.csv").resolve())
     assert chapter.SPEC.resolve({}, quick=True)["measurements_csv"] == ""
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_signal_during_the_output_swap_waits_for_its_end(signum):
+    """The swap of staging and output is not cut between its two renames: a signal arriving
+    inside ``signals_deferred`` takes effect (as KeyboardInterrupt here) only after the block."""
+    from railpaper.pipeline.chapters import signals_deferred
+    steps = []
+
+    def interrupt(sig, frame):
+        raise KeyboardInterrupt(sig)
+
+    old = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with signals_deferred():
+                os.kill(os.getpid(), signum)
+                time.sleep(0.05)
+                steps.append("first rename")
+                steps.append("second rename")
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert steps == ["first rename", "second rename"]

@@ -6,7 +6,9 @@ import fcntl
 import json
 import os
 import shutil
+import signal
 import sys
+import threading
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -73,6 +75,24 @@ def ensure_kernel() -> str:
     paths = [str(root)] + [p for p in os.environ.get("JUPYTER_PATH", "").split(os.pathsep) if p]
     os.environ["JUPYTER_PATH"] = os.pathsep.join(dict.fromkeys(paths))
     return KERNEL_NAME
+
+
+@contextmanager
+def signals_deferred():
+    """SIGINT and SIGTERM arriving inside the block take effect when it ends (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    previous = {s: signal.signal(s, lambda signum, frame: received.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if received:
+            signal.raise_signal(received[0])
 
 
 @contextmanager
@@ -171,8 +191,9 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                     f"{exc.evalue}".splitlines()[0]) from None
             raise
         previous = out.parent / f".{out.name}.previous-{os.getpid()}"
-        if out.exists():
-            out.rename(previous)
-        staging.rename(out)
-        shutil.rmtree(previous, ignore_errors=True)
+        with signals_deferred():                  # never between the renames: out would be gone
+            if out.exists():
+                out.rename(previous)
+            staging.rename(out)
+            shutil.rmtree(previous, ignore_errors=True)
     return out
