@@ -76,16 +76,19 @@ def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
                               **opts)
 
 
-def time_filter(prob: dict, kind: str, N: int, n_steps: int, per_step: bool = False
-                ) -> tuple[float, np.ndarray]:
-    """Seconds per step over steps 1..n_steps of the record, and the θ estimates (K, 5).
+def time_filter(prob: dict, kind: str, N: int, n_steps: int, per_step: bool = False,
+                skip: int = 0) -> tuple[float, np.ndarray]:
+    """Seconds per step over steps skip+1..skip+n_steps of the record (the first ``skip``
+    steps run untimed), and the θ estimates (n_steps, 5).
 
     The library's RBPF runs through ``steps`` (the working scheme then runs its Kalman bank
     over chunks of steps between resampling events: estimates lag by at most 32 samples);
     ``per_step=True`` calls ``step`` once per measurement (lag: none).
     """
     filt = make_filter(prob, kind, N)
-    Y, U = prob["y"][:n_steps], prob["u"][:n_steps]
+    if skip:
+        filt.steps(prob["y"][:skip], prob["u"][:skip])
+    Y, U = prob["y"][skip:skip + n_steps], prob["u"][skip:skip + n_steps]
     t0 = time.perf_counter()
     if hasattr(filt, "steps") and not per_step:
         est = np.array([o["theta_mean"] for o in filt.steps(Y, U)])
@@ -167,7 +170,8 @@ def main_payload(quick: bool, progress=print) -> dict:
     """Run the whole benchmark; returns the JSON payload (see railpaper.pipeline.bench)."""
     sizes = dict(working=200 if quick else 1000, paper=40 if quick else 200,
                  fp_working=30 if quick else 150, fp_paper=6 if quick else 25)
-    prob = lateral_problem(sizes["working"] + 10)
+    steady = dict(skip=1000 if quick else 2000, steps=200 if quick else 1000)
+    prob = lateral_problem(max(sizes["working"], steady["skip"] + steady["steps"]) + 10)
     progress("railpaper bench: compiling kernels")
     time_filter(prob, "rbpf-paper", 70, 3)
     time_filter(prob, "qgrbpf", 70, 3)
@@ -187,6 +191,11 @@ def main_payload(quick: bool, progress=print) -> dict:
     rows.append(dict(problem="lateral-16", filter="rbpf-working", engine="compiled, step()",
                      N=N, steps=sizes["working"], steps_per_s=1 / dt_step,
                      us_per_particle_step=dt_step / N * 1e6))
+    progress(f"railpaper bench: rbpf-working N={N}, steps after {steady['skip']} (settled)")
+    dt_steady, _ = time_filter(prob, "rbpf-working", N, steady["steps"], skip=steady["skip"])
+    rows.append(dict(problem="lateral-16", filter="rbpf-working", engine="compiled, settled",
+                     N=N, steps=steady["steps"], steps_per_s=1 / dt_steady,
+                     us_per_particle_step=dt_steady / N * 1e6))
     baselines = {}
     for kind, k in (("rbpf-working", "fp_working"), ("rbpf-paper", "fp_paper")):
         steps = sizes[k]
@@ -212,6 +221,7 @@ def main_payload(quick: bool, progress=print) -> dict:
         steps_per_s_rbpf_lateral_N1000=rate("rbpf-working", 1000),
         steps_per_s_rbpf_lateral_N1000_paper_scheme=rate("rbpf-paper", 1000),
         steps_per_s_rbpf_lateral_N1000_step_api=1 / dt_step,
+        steps_per_s_rbpf_lateral_N1000_settled=1 / dt_steady, settled_window=steady,
         steps_per_s_qgrbpf_lateral_N1000=rate("qgrbpf", 1000),
         speedup_vs_filterpy_lateral_N1000=baselines[("rbpf-working", "filterpy")],
         speedup_vs_filterpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "filterpy")],

@@ -177,7 +177,10 @@ def test_chunked_working_rbpf_equals_step_by_step(lateral_record):
     assert sum(o["resampled"] for o in stepwise) >= 5          # chunks really get cut back
     for o1, o2 in zip(chunked, stepwise):
         for key in o1:
-            assert np.array_equal(o1[key], o2[key], equal_nan=True), key
+            if key in ("x_mean", "x_std"):              # batched over a chunk: rounding only
+                np.testing.assert_allclose(o1[key], o2[key], rtol=1e-12, atol=1e-300)
+            else:                                       # the filter's path: bit-identical
+                assert np.array_equal(o1[key], o2[key], equal_nan=True), key
     assert np.array_equal(a.x, b.x) and np.array_equal(a.theta, b.theta)
 
 

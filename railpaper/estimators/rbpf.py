@@ -98,15 +98,27 @@ def mixture_moments(x: np.ndarray, P: np.ndarray, weights: np.ndarray
 
 def mixture_moments_var(x: np.ndarray, var: np.ndarray, weights: np.ndarray
                         ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`mixture_moments` from the components' variances ``var`` (N, n) = diag P_i.
+    """:func:`mixture_moments` from the components' variances ``var`` (N, n) = diag P_i."""
+    mean, std = mixture_moments_steps(x[:, None], var[:, None], weights[None])
+    return mean[0], std[0]
 
-    Centred and scaled per component, so states of 1e160 do not overflow the squares.
+
+def mixture_moments_steps(x: np.ndarray, var: np.ndarray, weights: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """Mixture mean and std for J steps at once: x, var (N, J, n), weights (J, N) → (J, n).
+
+    ``std² = Σ w (P_ii + (x_i − x̄)²)``, centred first; if a square overflows (states of
+    1e160), the components are rescaled by their largest magnitude and the sum redone.
     """
-    mean = weights @ x
+    mean = np.einsum("jn,njd->jd", weights, x)
     centred, var = x - mean, np.clip(var, 0.0, None)
+    with np.errstate(over="ignore", invalid="ignore"):
+        spread = np.einsum("jn,njd->jd", weights, var + centred * centred)
+    if np.all(np.isfinite(spread)):
+        return mean, np.sqrt(spread)
     scale = np.maximum(np.abs(centred).max(axis=0), np.sqrt(var.max(axis=0)))
     scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)   # no overflow in squares
-    spread = weights @ (var / scale ** 2 + (centred / scale) ** 2)   # Σ w (P_ii + (x_i − x̄)²)
+    spread = np.einsum("jn,njd->jd", weights, var / scale ** 2 + (centred / scale) ** 2)
     return mean, scale * np.sqrt(spread)
 
 
@@ -210,13 +222,19 @@ class RaoBlackwellisedPF:
             Uc = None if U is None else np.asarray(U, float)[k0:k0 + chunk]
             x_end, P_end, loglik, x_hist, var_hist = kalman_run(self.x, self.P, self.sys, Yc,
                                                                 Uc, record=True)
+            weights = []
             for j in range(len(Yc)):
-                out, w = self._weigh(loglik[:, j], x_hist[:, j], var_hist[:, j])
+                out, w = self._weigh(loglik[:, j])
                 outputs.append(out)
+                weights.append(w)
                 if out["resampled"]:
                     break
                 with np.errstate(divide="ignore"):
                     self.log_w = np.log(w)
+            means, stds = mixture_moments_steps(x_hist[:, :j + 1], var_hist[:, :j + 1],
+                                                np.array(weights))
+            for o, mean, std in zip(outputs[-(j + 1):], means, stds):
+                o["x_mean"], o["x_std"] = mean, std
             if out["resampled"]:
                 if j < len(Yc) - 1:                    # the bank's state after step j
                     x_end, P_end, _ = kalman_run(self.x, self.P, self.sys, Yc[:j + 1],
@@ -229,8 +247,10 @@ class RaoBlackwellisedPF:
             k0 += j + 1
         return outputs
 
-    def _weigh(self, loglik: np.ndarray, x: np.ndarray, var: np.ndarray) -> tuple[dict, np.ndarray]:
-        """Weights, estimates and the resampling decision of step k from its log-likelihoods."""
+    def _weigh(self, loglik: np.ndarray, x: np.ndarray | None = None,
+               var: np.ndarray | None = None) -> tuple[dict, np.ndarray]:
+        """Weights, estimates and the resampling decision of step k from its log-likelihoods
+        (the state moments only when x and var = diag P are given)."""
         self.k += 1
         n_particles = self.theta.shape[0]
         beta = 1.0
@@ -238,7 +258,7 @@ class RaoBlackwellisedPF:
             beta = self.k / self.tempering_steps
         w, log_norm, degenerate = normalise_log_weights(self.log_w + beta * loglik)
         theta_mean, theta_cov = weighted_mean_cov(self.theta, w)                # Eq. 17
-        x_mean, x_std = mixture_moments_var(x, var, w)
+        x_mean, x_std = (None, None) if x is None else mixture_moments_var(x, var, w)
         ess = effective_sample_size(w)
         resample = (self.scheme == "paper" or degenerate
                     or ess < self.ess_fraction * n_particles)
