@@ -10,6 +10,7 @@ noise; the RBPF over θ = (Csy, λ, Kpy, Ksy, Csaly) with the paper's literal sc
 working scheme (tempering, ESS-triggered resampling, Liu–West move only after resampling, on
 normalised log-parameters); the Kalman-likelihood CRLB; the augmented 21-state EKF from
 ``ekf_guesses`` initial guesses.  ``measurements_csv`` runs the working scheme on a user's file.
+``lateral=False`` skips Part 2 (Monte Carlo samples of the toy, see the notebook's sweep).
 """
 
 from __future__ import annotations
@@ -97,6 +98,10 @@ SPEC = ChapterSpec(
           "user CSV (t_s, acc_w1_mps2, acc_w2_mps2, acc_b_mps2, acc_bd_mps2, yawrate_b_radps"
           "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate",
           path=True),
+        P("lateral", True, "bool", "run Part 2, the lateral vehicle (Monte Carlo samples of the "
+          "toy switch it off; the notebook's main run needs it)"),
+        P("mc_seeds", 12, "int", "Monte Carlo toy records of the notebook's sweep (one per seed, "
+          "after the main run's toy_seeds records)", quick=4, minimum=2),
     ],
 )
 
@@ -295,15 +300,12 @@ def validate(p: dict) -> None:
         read_measurements(p["measurements_csv"], p)
 
 
-def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
-    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`)."""
-    progress = progress or no_progress
-    validate(p)
-    metrics, timings, data_out = {}, {}, {}
+def run_lateral(p: dict, metrics: dict, timings: dict, data_out: dict, progress
+                ) -> pd.DataFrame:
+    """Part 2 (critical speed, RBPF, CRLB, EKF) into the dicts; returns the time series."""
     fixed, theta = vehicle()
     v = p["speed_kmh"] / 3.6
     # critical speed, both readings of "half"
-    t0 = time.perf_counter()
     speeds = np.arange(10.0, 200.01, 2.0)
     halved = dict(fixed, mw=fixed["mw"] / 2, mb=fixed["mb"] / 2)
     doubled = dict(fixed, mw=fixed["mw"] * 2, mb=fixed["mb"] * 2)
@@ -315,27 +317,6 @@ def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
     metrics["least_damped_real_at_speed_per_s"] = L.least_damped(L.build_A_direct(fixed, theta,
                                                                                   v))[0]
     data_out["critical"] = pd.DataFrame({"speed_kmh": speeds * 3.6, **curves})
-    # Part 1
-    progress(0.05, "toy")
-    t0 = time.perf_counter()
-    toy = run_toy(p)
-    timings["toy_s"] = time.perf_counter() - t0
-    st = toy["stats"]
-    for ic in (1, 2):
-        main = st[(st.seed == p["seed"]) & (st.init == ic)].iloc[0]
-        sub = st[st.init == ic]
-        metrics[f"toy_ekf_diverged_init{ic}"] = bool(main.ekf_diverged)
-        metrics[f"toy_ekf_final_abs_error_max_init{ic}"] = float(main.ekf_err_max)
-        metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
-        metrics[f"toy_ekf_diverged_fraction_init{ic}"] = float(sub.ekf_diverged.mean())
-        metrics[f"toy_ekf_biased_fraction_init{ic}"] = float(sub.ekf_biased.mean())
-        metrics[f"toy_rbpf_error_median_init{ic}"] = float(sub.rbpf_err_max.median())
-        metrics[f"toy_rbpf_error_p90_init{ic}"] = float(sub.rbpf_err_max.quantile(0.9))
-        metrics[f"toy_rbpf_working_error_median_init{ic}"] = float(
-            sub.rbpf_working_err_max.median())
-        metrics[f"toy_rbpf_working_error_p90_init{ic}"] = float(
-            sub.rbpf_working_err_max.quantile(0.9))
-    data_out["toy_truth"], data_out["toy_stats"] = toy["truth"], st
     # Part 2: data
     user = bool(p["measurements_csv"])
     records = ([read_measurements(p["measurements_csv"], p)] if user else
@@ -388,11 +369,39 @@ def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
             metrics["ekf_lateral_converged_of_10"] = int(sum(conv))
         data_out["ekf"] = ekf
     main = runs["working"][0]
-    ts = pd.DataFrame({"t_s": np.arange(1, len(main) + 1) * p["dt_s"]})
-    for j, name in enumerate(L.PARAM_NAMES):
-        ts[f"{name}_norm"] = main[:, j]
-    for j, name in enumerate(L.PARAM_NAMES):
-        ts[f"{name}_norm_paper_scheme"] = runs["paper"][0][:, j]
+    paper, names = runs["paper"][0], list(enumerate(L.PARAM_NAMES))
+    return pd.DataFrame({"t_s": np.arange(1, len(main) + 1) * p["dt_s"],
+                         **{f"{name}_norm": main[:, j] for j, name in names},
+                         **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
+
+
+def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
+    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`)."""
+    progress = progress or no_progress
+    validate(p)
+    metrics, timings, data_out = {}, {}, {}
+    # Part 1
+    progress(0.05, "toy")
+    t0 = time.perf_counter()
+    toy = run_toy(p)
+    timings["toy_s"] = time.perf_counter() - t0
+    st = toy["stats"]
+    for ic in (1, 2):
+        main = st[(st.seed == p["seed"]) & (st.init == ic)].iloc[0]
+        sub = st[st.init == ic]
+        metrics[f"toy_ekf_diverged_init{ic}"] = bool(main.ekf_diverged)
+        metrics[f"toy_ekf_final_abs_error_max_init{ic}"] = float(main.ekf_err_max)
+        metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
+        metrics[f"toy_ekf_diverged_fraction_init{ic}"] = float(sub.ekf_diverged.mean())
+        metrics[f"toy_ekf_biased_fraction_init{ic}"] = float(sub.ekf_biased.mean())
+        metrics[f"toy_rbpf_error_median_init{ic}"] = float(sub.rbpf_err_max.median())
+        metrics[f"toy_rbpf_error_p90_init{ic}"] = float(sub.rbpf_err_max.quantile(0.9))
+        metrics[f"toy_rbpf_working_error_median_init{ic}"] = float(
+            sub.rbpf_working_err_max.median())
+        metrics[f"toy_rbpf_working_error_p90_init{ic}"] = float(
+            sub.rbpf_working_err_max.quantile(0.9))
+    data_out["toy_truth"], data_out["toy_stats"] = toy["truth"], st
+    ts = run_lateral(p, metrics, timings, data_out, progress) if p["lateral"] else None
     progress(1.0, "done")
     return ChapterResult(metrics=metrics, timings=timings, timeseries=ts,
                          extra_tables={"toy_timeseries": toy["table"]}, data=data_out)
