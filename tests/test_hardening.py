@@ -33,6 +33,11 @@ ROO, RBPF, PSO, QG = ("reduced-order-observer", "rbpf-parameter-estimation",
 CHEAP = ["--quick", "-p", "mc_seeds", "2", "-p", "sweep_speeds_kmh", "[60]",
          "-p", "speeds_kmh", "[60]"]
 SIGNAL_AFTER_S = 2.0          # after the staging directory appears: the kernel is running cells
+# Runs to be interrupted simulate 30 s of track (about a minute on a quiet machine): they must still
+# be running when the signal comes, however loaded the machine is.
+LONG = ["-p", "duration_s", "30"]
+# The first run holds the chapter's lock while a second run is refused: 8 s of track (about 30 s).
+MEDIUM = ["-p", "duration_s", "8"]
 
 # (id, arguments, exit status, key words of the one line).  {OUT}: an output directory holding a
 # previous run's files (must stay byte-identical); {CSV}: a measurement CSV written for the case;
@@ -310,9 +315,9 @@ def test_bad_input(outcomes, case, args, status, words):
 
 # ------------------------------------------------------------- runs: concurrent and interrupted
 
-def _start_run(out: Path) -> subprocess.Popen:
+def _start_run(out: Path, extra: tuple[str, ...] = ()) -> subprocess.Popen:
     env = dict(os.environ, PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1")
-    return subprocess.Popen([sys.executable, "-m", "railpaper", "run", ROO, *CHEAP,
+    return subprocess.Popen([sys.executable, "-m", "railpaper", "run", ROO, *CHEAP, *extra,
                              "--out", str(out)], cwd=REPO, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
@@ -347,12 +352,12 @@ def runs(tmp_path_factory):
     SIGTERM once their kernels execute cells."""
     base = tmp_path_factory.mktemp("runs")
     out = base / "first" / "run"
-    first = _start_run(out)
+    first = _start_run(out, MEDIUM)
     _wait_for_staging(out, first)
     interrupted = {}
     for signum in (signal.SIGINT, signal.SIGTERM):
         target = _previous_run(base / signum.name / "run")
-        interrupted[signum] = (target, snapshot(target), _start_run(target))
+        interrupted[signum] = (target, snapshot(target), _start_run(target, LONG))
     second = railpaper_cli("run", ROO, *CHEAP, "--out", str(out), timeout=120)
     for signum, (target, before, process) in interrupted.items():
         staging = _wait_for_staging(target, process)

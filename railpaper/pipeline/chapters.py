@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import logging
 import os
 import shutil
 import signal
@@ -118,11 +119,47 @@ def _logging_kernel_manager(log_path: Path):
 
     class LoggingKernelManager(AsyncKernelManager):
         async def start_kernel(self, **kw):
-            with open(log_path, "w") as log:           # the child keeps its own copy of the fd
+            with open(log_path, "a") as log:           # the child keeps its own copy of the fd
                 kw.setdefault("stderr", log)
                 return await super().start_kernel(**kw)
 
     return LoggingKernelManager
+
+
+# Loggers that report on the notebook's execution.  Left alone they print to our stderr through
+# logging's last-resort handler; on an interrupt that is "Kernel died while waiting for execute
+# reply" and, at exit, asyncio's "Task exception was never retrieved" traceback of the cell that
+# was running.
+_NOTEBOOK_LOGGERS = ("papermill", "nbclient", "traitlets", "asyncio")
+
+
+@contextmanager
+def _notebook_logs_to(log_path: Path):
+    """Send the notebook machinery's log records to ``log_path`` (appended) while the block runs.
+
+    On an interrupt the redirection stays in place: asyncio reports the killed cell's pending
+    task only when the process exits, after our one-line message.
+    """
+    handler = logging.FileHandler(log_path, mode="a", delay=True)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s: %(message)s"))
+    loggers = [logging.getLogger(name) for name in _NOTEBOOK_LOGGERS]
+    saved = [(logger.propagate, logger.handlers[:]) for logger in loggers]
+    for logger in loggers:
+        logger.handlers = [handler]
+        logger.propagate = False
+    def restore():
+        for logger, (propagate, handlers) in zip(loggers, saved):
+            logger.handlers, logger.propagate = handlers, propagate
+        handler.close()
+
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise                                    # keep the redirection: the process is ending
+    except BaseException:
+        restore()
+        raise
+    restore()
 
 
 def hide_parameter_cells(notebook_path: Path) -> None:
@@ -173,13 +210,16 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
         staging = out.parent / f".{out.name}.staging-{os.getpid()}"
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir(parents=True)
+        kernel_log = out.parent / f".{out.name}.kernel.log"
+        kernel_log.write_text("")                 # this run's log only; kernel and loggers append
         try:
-            papermill.execute_notebook(
-                str(source), str(staging / spec.notebook),
-                parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
-                kernel_name=kernel, cwd=str(staging), progress_bar=progress,
-                request_save_on_cell_execute=False,
-                kernel_manager_class=_logging_kernel_manager(out.parent / f".{out.name}.kernel.log"))
+            with _notebook_logs_to(kernel_log):
+                papermill.execute_notebook(
+                    str(source), str(staging / spec.notebook),
+                    parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
+                    kernel_name=kernel, cwd=str(staging), progress_bar=progress,
+                    request_save_on_cell_execute=False,
+                    kernel_manager_class=_logging_kernel_manager(kernel_log))
             if not (staging / "metrics.json").exists():
                 raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
             hide_parameter_cells(staging / spec.notebook)
@@ -189,6 +229,9 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                 raise PipelineError(
                     f"chapter '{name}' failed in cell {exc.exec_count}: {exc.ename}: "
                     f"{exc.evalue}".splitlines()[0]) from None
+            if type(exc).__name__ == "DeadKernelError":          # nbclient: e.g. out of memory
+                raise PipelineError(f"chapter '{name}': the notebook kernel died (out of memory? "
+                                    f"see {kernel_log})") from None
             raise
         previous = out.parent / f".{out.name}.previous-{os.getpid()}"
         with signals_deferred():                  # never between the renames: out would be gone
