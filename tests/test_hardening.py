@@ -319,7 +319,14 @@ def _start_run(out: Path, extra: tuple[str, ...] = ()) -> subprocess.Popen:
     env = dict(os.environ, PYTHONWARNINGS="ignore", OMP_NUM_THREADS="1")
     return subprocess.Popen([sys.executable, "-m", "railpaper", "run", ROO, *CHEAP, *extra,
                              "--out", str(out)], cwd=REPO, env=env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            preexec_fn=_default_sigint)
+
+
+def _default_sigint() -> None:
+    """SIGINT as in a terminal, even when this suite runs in the background of a script (which
+    starts it with SIGINT ignored, and a child inherits that)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for_staging(out: Path, process: subprocess.Popen, timeout_s: float = 60) -> Path:
@@ -430,7 +437,7 @@ def test_signal_during_the_output_swap_waits_for_its_end(signum):
     def interrupt(sig, frame):
         raise KeyboardInterrupt(sig)
 
-    old = signal.signal(signal.SIGTERM, interrupt)
+    old = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with pytest.raises(KeyboardInterrupt):
             with signals_deferred():
@@ -439,5 +446,6 @@ def test_signal_during_the_output_swap_waits_for_its_end(signum):
                 steps.append("first rename")
                 steps.append("second rename")
     finally:
-        signal.signal(signal.SIGTERM, old)
+        for s, handler in old.items():
+            signal.signal(s, handler)
     assert steps == ["first rename", "second rename"]
