@@ -75,6 +75,9 @@ def test_resume_skips_completed_rows(tmp_path, scheduler, capsys):
     redone = again[again["sample"] == first["sample"][2]].iloc[0]
     assert redone[METRICS[1]] == first[METRICS[1]][2]             # recomputed, same number
     assert redone.wall_time_s != first.wall_time_s[2]
+    complete = run_sweep(CHAPTER, {"noise_fraction": [0.01, 0.03]}, "0:3", out, fixed=FIXED,
+                         quick=True, scheduler=scheduler, progress=False)   # nothing left to do
+    pd.testing.assert_frame_equal(complete, again)
 
 
 def test_failing_sample_is_recorded_and_the_others_complete(tmp_path, scheduler):
@@ -155,3 +158,33 @@ def test_refuses_a_directory_of_another_sweep(tmp_path):
     with pytest.raises(PipelineError, match="holds a sweep of"):
         run_sweep(CHAPTER, {}, "0:1", out, progress=False)            # full, not quick
     assert sorted(p.name for p in out.iterdir()) == ["sweep.json"]
+
+
+def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
+    """Paper 004's chapter runs its Monte Carlo records as a sweep of single-record runs (the
+    notebook's path): same table and metrics, bit for bit, as running the records in-process;
+    and each sample's row is what ``run`` gives for that record alone."""
+    from railpaper.experiments import quasi_gaussian_rbpf as qg
+    from railpaper.pipeline.sweep import sweep_samples
+    small = qg.SPEC.resolve(dict(n_particles=40, n_steps=30, grid_size=11, n_monte_carlo=3,
+                                 record=2, timing=False), True)
+    frames = []
+
+    def on_workers(p, records, progress):
+        frame = sweep_samples(qg.SPEC.name, {"record": records},
+                              dict(p, n_monte_carlo=1, timing=False), tmp_path / "mc", quick=True,
+                              workers=1)
+        frames.append(frame)
+        return frame.rename(columns={"record": "replicate"})
+
+    in_process = qg.run(quick=True, **small)
+    on_sweep = qg.run(quick=True, monte_carlo=on_workers, **small)
+    assert in_process.metrics == on_sweep.metrics
+    pd.testing.assert_frame_equal(in_process.data["monte_carlo"], on_sweep.data["monte_carlo"])
+    assert on_sweep.data["monte_carlo"].replicate.tolist() == [2, 3, 4]
+    assert frames[0].record.tolist() == [3, 4] and (frames[0].status == "ok").all()
+    alone = qg.run(quick=True, **dict(small, record=4, n_monte_carlo=1)).metrics
+    row = on_sweep.data["monte_carlo"].iloc[2]
+    assert all(row[k] == alone[k] for k in row.index if k != "replicate")
+    with pytest.raises(ValueError, match="records incomplete"):
+        qg.run(quick=True, monte_carlo=lambda p, r, _: on_workers(p, r[:1], _), **small)

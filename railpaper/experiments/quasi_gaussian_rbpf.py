@@ -12,8 +12,11 @@ Convergence is judged against the exact posterior: a filter "converges at step k
 step k on its estimate stays within two posterior standard deviations of the posterior mean
 (−1: outside at the last step).  For comparison with the paper we also report the first step at
 which the estimate gets within ``tolerance_to_truth`` of the true value.  The same is repeated
-for ``n_monte_carlo`` records (replicate 0 is the main record); the computing time of each filter
-is measured on the main record for several particle counts.
+for ``n_monte_carlo`` records (replicate ``record`` is the main record, the others follow it); the
+records other than the main one are run by a caller-supplied function (the notebook runs them as a
+sweep on worker processes, each sample being this module's ``run`` for one record) or in this
+process.  The computing time of each filter is measured on the main record for several particle
+counts.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_filter
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
                                         no_progress)
+from railpaper.experiments.quasi_gaussian_rbpf_claims import claims_table  # noqa: F401
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
 from railpaper.settling import settled_index
 
@@ -65,6 +69,10 @@ SPEC = ChapterSpec(
           quick=61, minimum=3),
         P("n_monte_carlo", 50, "int", "records (seeds) of the Monte Carlo study", quick=8,
           minimum=1),
+        P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
+          "Monte Carlo records are record+1, record+2, …", minimum=0),
+        P("timing", True, "bool", "measure computing times (false: a Monte Carlo sample of a "
+          "sweep, which needs only the record's metrics)"),
         P("timing_particles", [100, 300, 1000, 3000, 10000], "list[int]",
           "particle counts of the computing-time comparison", quick=[100, 300, 1000],
           positive=True),
@@ -294,20 +302,50 @@ def _timing(p: dict, y: np.ndarray, progress) -> tuple[dict, pd.DataFrame]:
     return timings, table
 
 
-def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
-    """Run the chapter: main record, Monte Carlo over records, computing times."""
+def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.DataFrame:
+    """Per-record metrics (column ``replicate`` = record index) of ``records``, one by one."""
+    rows = []
+    for i, index in enumerate(records):
+        progress(0.9 * (i + 1) / (len(records) + 1), f"Monte Carlo record {i + 1}/{len(records)}")
+        rows.append(dict(replicate=index, **_record_metrics(p, replicate(p, index))))
+    return pd.DataFrame(rows)
+
+
+def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> ChapterResult:
+    """Run the chapter: main record, Monte Carlo over records, computing times.
+
+    Parameters
+    ----------
+    quick : bool
+        The chapter's quick sizes for parameters not given.
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    monte_carlo : callable, optional
+        ``monte_carlo(p, records, progress)`` → DataFrame with a ``replicate`` column (the record
+        index) and the per-record metrics of ``records`` (all but the main record), e.g. a sweep
+        of this function with ``n_monte_carlo = 1``, ``timing = False`` and ``record`` as the grid.
+        Default: :func:`records_in_process`.
+    **params
+        Chapter parameters (:data:`SPEC`).
+    """
     progress = progress or no_progress
     p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
     validate(p)
     start = time.perf_counter()
-    main = replicate(p, 0)
-    rows = [dict(replicate=0, **_record_metrics(p, main))]
-    for r in range(1, p["n_monte_carlo"]):
-        progress(0.9 * r / p["n_monte_carlo"], f"Monte Carlo record {r + 1}/{p['n_monte_carlo']}")
-        rows.append(dict(replicate=r, **_record_metrics(p, replicate(p, r))))
+    main = replicate(p, p["record"])
+    first = dict(replicate=p["record"], **_record_metrics(p, main))
+    records = list(range(p["record"] + 1, p["record"] + p["n_monte_carlo"]))
+    mc_table = pd.DataFrame([first])
+    if records:
+        others = (monte_carlo or records_in_process)(p, records, progress)
+        missing = sorted(set(first) - set(others.columns))
+        if missing or sorted(others["replicate"]) != records:
+            raise ValueError(f"Monte Carlo records incomplete: expected records {records[0]}-"
+                             f"{records[-1]}{', columns ' + ', '.join(missing[:3]) if missing else ''}")
+        others = others.sort_values("replicate", kind="stable")[list(first)]
+        mc_table = pd.concat([mc_table, others], ignore_index=True)
     mc_seconds = time.perf_counter() - start
-    mc_table = pd.DataFrame(rows)
-    metrics = {k: v for k, v in rows[0].items() if k != "replicate"}
+    metrics = {k: v for k, v in first.items() if k != "replicate"}
     metrics.update(_monte_carlo_metrics(p, mc_table))
     exact = main["exact"]
     metrics["grid_min_std_over_spacing"] = exact.min_std_over_spacing
@@ -316,7 +354,7 @@ def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
         abs(metrics["final_error_a_rbpf"]) - abs(metrics["final_error_a_qgrbpf"])) / abs(p["a_true"])
     metrics["paper_accuracy_gain_b_percent"] = 100.0 * (
         abs(metrics["final_error_b_rbpf"]) - abs(metrics["final_error_b_qgrbpf"])) / abs(p["b_true"])
-    timings, timing_table = _timing(p, main["sim"].y, progress)
+    timings, timing_table = _timing(p, main["sim"].y, progress) if p["timing"] else ({}, None)
     timings["monte_carlo_seconds"] = mc_seconds
     progress(1.0, "done")
     return ChapterResult(
@@ -324,67 +362,3 @@ def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
         extra_tables={"monte_carlo": mc_table},
         data={"timing_table": timing_table, "exact": exact, "runs": main["runs"],
               "sim": main["sim"], "monte_carlo": mc_table, "filters": FILTERS})
-
-
-def _step_verdict(ours: int, paper: int) -> bool:
-    """A settling step 'reproduces' a printed one when within a factor 3 of it."""
-    return 0 < ours and paper / 3 <= ours <= 3 * paper
-
-
-def claims_table(result: ChapterResult, params: dict) -> pd.DataFrame:
-    """Paper 004's claims beside ours, with verdicts computed from this run."""
-    m, t, tol = result.metrics, result.timings, params["tolerance_to_truth"]
-    step4 = result.timeseries.step == min(4, params["n_steps"])
-    rows = []
-    for par, paper_qg, paper_rb in (("a", 4, 55), ("b", 4, 53)):
-        post_std_4 = float(result.timeseries.loc[step4, f"{par}_post_std"].iloc[0])
-        qg, pr, rb, post = (m[f"mc_median_settling_step_{par}_{f}"]
-                            for f in ("qgrbpf", "qgrbpf_printed", "rbpf", "posterior"))
-        outside = 1.0 - m[f"mc_within_2std_fraction_{par}_qgrbpf_printed"]
-        if _step_verdict(qg, paper_qg):
-            verdict = "reproduced"
-        elif _step_verdict(pr, paper_qg):
-            verdict = (f"reproduced only by Eq. (10) as printed, as a collapse: it ends more than 2 "
-                       f"posterior std from the posterior mean in {outside:.0%} of records")
-        else:
-            verdict = "not reproduced"
-        rows.append((f"{par}: Q-GRBPF converges at step {paper_qg}",
-                     f"median settling step (±{tol:g}) over {m['mc_records']} records: Q-GRBPF {qg}, "
-                     f"Q-GRBPF as printed {pr}, exact posterior mean {post}; posterior std at step 4 "
-                     f"= {post_std_4:.2f}; 2σ-rule step (record 0): Q-GRBPF "
-                     f"{m[f'convergence_step_{par}_qgrbpf']}, as printed "
-                     f"{m[f'convergence_step_{par}_qgrbpf_printed']}", verdict))
-        rows.append((f"{par}: RBPF converges at step {paper_rb}",
-                     f"median settling step: RBPF {rb}, exact posterior mean {post}; 2σ-rule step "
-                     f"(record 0): {m[f'convergence_step_{par}_rbpf']}, never converged in "
-                     f"{m[f'mc_never_converged_fraction_{par}_rbpf']:.0%} of records",
-                     ("reproduced (same order; the exact posterior mean settles as late)"
-                      if _step_verdict(rb, paper_rb) and _step_verdict(post, rb) else
-                      "reproduced (same order)" if _step_verdict(rb, paper_rb) else
-                      "not reproduced")))
-    for par, true, e_qg, e_rb in (("a", params["a_true"], 0.066, 0.167),
-                                  ("b", params["b_true"], -0.055, -0.067)):
-        med = {f: m[f"mc_median_abs_final_error_{par}_{f}"]
-               for f in ("qgrbpf", "qgrbpf_printed", "rbpf", "posterior")}
-        rows.append((
-            f"{par}: final error Q-GRBPF {e_qg:+.3f}, RBPF {e_rb:+.3f} (accuracy gain "
-            f"{100 * (abs(e_rb) - abs(e_qg)) / abs(true):.1f} %)",
-            f"record 0: Q-GRBPF {m[f'final_error_{par}_qgrbpf']:+.3f}, RBPF "
-            f"{m[f'final_error_{par}_rbpf']:+.3f} (gain {m[f'paper_accuracy_gain_{par}_percent']:.1f} %), "
-            f"exact posterior {m[f'final_error_{par}_posterior']:+.3f} ± "
-            f"{m[f'final_std_{par}_posterior']:.3f}; median |error|: Q-GRBPF {med['qgrbpf']:.3f}, "
-            f"as printed {med['qgrbpf_printed']:.3f}, RBPF {med['rbpf']:.3f}, posterior "
-            f"{med['posterior']:.3f}",
-            "reproduced" if min(med["qgrbpf"], med["qgrbpf_printed"]) < med["rbpf"] else
-            "not reproduced: the RBPF is the more accurate; errors of this size are the "
-            "posterior's own uncertainty"))
-    ratio = t.get("time_ratio_qgrbpf_over_rbpf", float("nan"))
-    share = t.get(f"resampling_share_of_rbpf_step_N{params['n_particles']}", float("nan"))
-    rows.append((
-        "Q-GRBPF needs about 56 % less computing time",
-        f"Q-GRBPF / RBPF time per step at N = {params['n_particles']}: {ratio:.2f} "
-        f"({100 * (1 - ratio):+.0f} % saving); systematic resampling is {100 * share:.0f} % of an "
-        "RBPF step",
-        "reproduced" if ratio < 0.6 else "not reproduced: resampling is cheap when vectorised; "
-        "both filters cost one Kalman update per particle and step"))
-    return pd.DataFrame(rows, columns=["paper claim (paper 004, Section IV)", "ours", "verdict"])

@@ -36,9 +36,12 @@ from railpaper.pipeline.sweep_table import (RESERVED_COLUMNS, load_results, samp
 #: The chapter parameter that seeds every random draw of a run (all chapters have it).
 SEED_PARAMETER = "seed"
 
-#: One BLAS/OpenMP thread per worker process: two numpy processes on two cores with default
+#: One BLAS/OpenMP/numba thread per worker process: two numpy processes on two cores with default
 #: threading slow each other several-fold, and the thread count changes the last digits of floats.
-SINGLE_THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: Numba's parallel loops (the Kalman bank) with two threads in each of two workers ran 4-5x
+#: slower than with one (paper 004's record: 0.74 s -> 3.8-4.4 s at load 5).
+SINGLE_THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                     "NUMBA_NUM_THREADS": "1"}
 
 
 def parse_seeds(text: str | Iterable[int]) -> list[int]:
@@ -290,7 +293,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
         futures = {client.submit(run_sample, chapter, quick, overrides, pure=False):
                    (key, point) for key, point, overrides in todo}
         meter = _Progress(len(samples), len(samples) - len(todo), progress)
-        for future in as_completed(futures):
+        for future in as_completed(futures) if futures else ():     # all done: no client
             key, point = futures.pop(future)
             try:
                 outcome = future.result()
@@ -312,6 +315,30 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     write_csv_atomic(everything, out / "results.csv")
     frame = everything[everything["sample"].isin(keys)].reset_index(drop=True)
     write_csv_atomic(summarise(frame, list(grid)), out / "summary.csv")
+    return frame
+
+
+def sweep_samples(chapter: str, grid: dict[str, list], params: dict[str, Any],
+                  out_dir: str | Path, *, quick: bool = False,
+                  workers: int | None = None) -> pd.DataFrame:
+    """A chapter's Monte Carlo samples as a sweep, for a notebook: the rows, all ``ok``.
+
+    Every sample is ``params`` (resolved chapter parameters, seed included) with one combination
+    of ``grid`` values; the samples run on local worker processes (at most two by default, so
+    that a notebook does not take a bigger machine's every core).
+
+    Raises
+    ------
+    PipelineError
+        If any sample failed (the first error is in the message).
+    """
+    fixed = {k: v for k, v in params.items() if k not in grid and k != SEED_PARAMETER}
+    frame = run_sweep(chapter, grid, [params[SEED_PARAMETER]], out_dir, fixed=fixed, quick=quick,
+                      workers=workers or min(2, os.cpu_count() or 1), progress=False)
+    failed = frame[frame.status != "ok"]
+    if len(failed):
+        raise PipelineError(f"{len(failed)} of {len(frame)} Monte Carlo samples of {chapter} "
+                            f"failed; first: {failed.error.iloc[0]}")
     return frame
 
 
