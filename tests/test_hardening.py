@@ -60,6 +60,13 @@ MATRIX = [
      ["no parameter 'dt_ss'", "did you mean 'dt_s'"]),
     ("run-misspelt-parameter-rbpf", ["run", RBPF, "-p", "n_particle", "10", "--out", "{OUT}"], 2,
      ["did you mean 'n_particles'"]),
+    # run: values that only Monte Carlo samples of a sweep may take
+    ("run-sample-only-side-tables", ["run", ROO, "-p", "side_tables", "false", "--out", "{OUT}"],
+     2, ["side_tables = false is for Monte Carlo samples", "needs side_tables = true"]),
+    ("run-sample-only-lateral", ["run", RBPF, "-p", "lateral", "false", "--out", "{OUT}"], 2,
+     ["lateral = false is for Monte Carlo samples", "needs lateral = true"]),
+    ("run-sample-only-timing", ["run", QG, "-p", "timing", "false", "--out", "{OUT}"], 2,
+     ["timing = false is for Monte Carlo samples", "needs timing = true"]),
     # run: wrong types
     ("run-type-float", ["run", QG, "-p", "a_true", "abc", "--out", "{OUT}"], 2,
      ["'a_true' expects float", "'abc'"]),

@@ -118,6 +118,9 @@ class ChapterSpec:
     notebook: str
     parameters: list[Parameter]
     quick_sizes: str = ""
+    #: Parameter values the chapter's notebook needs; other values of these parameters are
+    #: for Monte Carlo samples of ``railpaper sweep`` only (e.g. a sample without side studies).
+    notebook_requires: dict[str, Any] = field(default_factory=dict)
 
     def parameter(self, name: str) -> Parameter:
         for p in self.parameters:

@@ -43,6 +43,7 @@ SPEC = ChapterSpec(
     paper="004_e1cb56090c839832.txt",
     notebook="quasi_gaussian_rbpf.ipynb",
     quick_sizes="300 particles, 200 steps, 61x61 grid, 8 Monte Carlo records, timing up to N=1000",
+    notebook_requires={"timing": True},
     parameters=[
         P("a_true", -0.7, "float", "true parameter a of Eq. (20), 1"),
         P("b_true", 1.5, "float", "true parameter b of Eq. (20), 1"),

@@ -40,6 +40,7 @@ SPEC = ChapterSpec(
     notebook="rbpf_parameter_estimation.ipynb",
     quick_sizes="toy: 300 steps, 300 particles, 6 seeds; lateral: 1000 steps, 150 particles, "
                 "2 seeds (working), 1 seed (paper scheme), EKF 10 guesses x 1000 steps",
+    notebook_requires={"lateral": True},
     parameters=[
         P("seed", 0, "int", "seed of the main run (seed + i for the i-th replicate)", minimum=0),
         P("toy_x1", -0.4, "float", "true x1 of Eq. (18), 1"),

@@ -33,6 +33,7 @@ SPEC = ChapterSpec(
     notebook="reduced_order_observer.ipynb",
     quick_sizes="1 s simulated instead of 2 s; trend sweep over 4 speeds instead of 9; "
                 "3 Monte Carlo seeds instead of 8",
+    notebook_requires={"side_tables": True},
     parameters=[
         Parameter("speeds_kmh", [60.0, 100.0], "list[float]",
                   "speeds of the main runs (figures, time series, metrics), km/h", positive=True),
