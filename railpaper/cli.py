@@ -241,8 +241,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
     except KeyboardInterrupt as exc:
         signum = exc.args[0] if isinstance(exc, Interrupted) else signal.SIGINT
-        print(f"railpaper: error: interrupted by {signal.Signals(signum).name}; previous outputs "
-              "left untouched", file=sys.stderr)
+        kept = (f"finished samples kept in {args.out / 'results.csv'}; the same command resumes"
+                if args.func is cmd_sweep else "previous outputs left untouched")
+        print(f"railpaper: error: interrupted by {signal.Signals(signum).name}; {kept}",
+              file=sys.stderr)
         return 128 + signum
     finally:
         signal.signal(signal.SIGTERM, previous_handler)

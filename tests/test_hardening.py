@@ -411,6 +411,34 @@ def test_interrupted_run_keeps_previous_outputs(runs, signum):
     assert r["left"] == []                                # no kernel left running in staging
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupted_sweep_keeps_finished_samples(tmp_path, signum):
+    """A sweep interrupted mid-way ends in one error line (no dask warnings of the cancelled
+    samples), exit 128+signal, and its results.csv holds the samples finished so far."""
+    out = tmp_path / "sweep"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "railpaper", "sweep", ROO, *CHEAP[1:], "--quick", "--seeds",
+         "0:500", "--workers", "1", "--out", str(out)], cwd=REPO, text=True,
+        env=dict(os.environ, PYTHONWARNINGS="ignore"), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, preexec_fn=_default_sigint)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        results = out / "results.csv"
+        if results.exists() and len(results.read_text().splitlines()) >= 3:   # 2 samples done
+            break
+        time.sleep(0.1)
+    assert process.poll() is None, process.communicate()
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=60)
+    assert "Traceback" not in stderr and "WARNING" not in stderr, stderr[-3000:]
+    errors = [line for line in stderr.splitlines() if not line.startswith("railpaper: sweep")]
+    assert errors == [f"railpaper: error: interrupted by {signum.name}; finished samples kept "
+                      f"in {out / 'results.csv'}; the same command resumes"], stderr[-3000:]
+    assert process.returncode == 128 + signum
+    table = pd.read_csv(out / "results.csv")
+    assert len(table) >= 2 and (table.status == "ok").all()
+
+
 # ------------------------------------------------------------------------ the sample-time bound
 
 def test_sample_time_bound_against_an_oscillator():

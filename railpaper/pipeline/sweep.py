@@ -172,7 +172,16 @@ def _client(scheduler: str | None, workers: int | None):
     n = workers or os.cpu_count() or 1
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
                            dashboard_address=":0", env=dict(SINGLE_THREAD_ENV))
-    return Client(cluster), cluster
+    client = Client(cluster)
+    client.run(_quiet_worker_logs)     # our workers share our stderr: progress lines only there
+    return client, cluster
+
+
+def _quiet_worker_logs() -> None:
+    """On a local worker: only errors of dask's loggers (an interrupted sweep otherwise ends in
+    'Async instruction … ended with CancelledError' warnings of the cancelled samples)."""
+    import logging
+    logging.getLogger("distributed").setLevel(logging.ERROR)
 
 
 class _Progress:
