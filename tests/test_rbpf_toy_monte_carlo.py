@@ -68,3 +68,12 @@ def test_sweep_records_follow_the_main_run():
                                                  "lateral": True, "n_steps": 10})
     assert list(seeds) == [7, 8, 9, 10, 11]
     assert fixed == {"toy_seeds": 1, "lateral": False, "n_steps": 10}
+
+
+def test_no_finished_sample_is_one_clear_error():
+    sweep = _sweep(np.random.default_rng(1), n_ok=0, n_failed=3).assign(error="MemoryError: x")
+    with pytest.raises(ValueError, match="no Monte Carlo sample .* ok; first error: MemoryError"):
+        toy_mc.monte_carlo_metrics(sweep)
+    with pytest.raises(ValueError, match="no Monte Carlo sample"):
+        toy_mc.ekf_event_rates(sweep[sweep.status == "ok"], pd.DataFrame(
+            {"init": [1], "ekf_diverged": [False], "ekf_biased": [False]}))

@@ -37,6 +37,7 @@ def ekf_event_rates(samples: pd.DataFrame, toy_stats: pd.DataFrame) -> pd.DataFr
     """EKF divergence / bias rates per initial condition, from the sweep's ``ok`` samples alone
     and from them together with the main run's records (``toy_stats``: columns init,
     ekf_diverged, ekf_biased); a sample counts as an event when its record's fraction is > 0.5."""
+    _require_samples(samples)
     rows = []
     for ic in (1, 2):
         main = toy_stats[toy_stats.init == ic]
@@ -56,6 +57,7 @@ def monte_carlo_metrics(sweep: pd.DataFrame) -> dict:
     """The ``mc_*`` metrics from a sweep's rows (all statuses): failed samples; EKF divergence
     and bias fractions; median and 90 % quantile of the RBPFs' final errors."""
     ok = sweep[sweep.status == "ok"]
+    _require_samples(ok, sweep)
     metrics = {"mc_failed_samples": int((sweep.status != "ok").sum())}
     for ic in (1, 2):
         for event, _, name in EVENTS:
@@ -68,6 +70,12 @@ def monte_carlo_metrics(sweep: pd.DataFrame) -> dict:
         metrics[f"mc_rbpf_working_final_abs_error_median_ic{ic}"] = float(
             ok[f"toy_rbpf_working_error_median_init{ic}"].median())
     return metrics
+
+
+def _require_samples(ok: pd.DataFrame, sweep: pd.DataFrame | None = None) -> None:
+    if len(ok) == 0:
+        first = "" if sweep is None or not len(sweep) else f"; first error: {sweep.error.iloc[0]}"
+        raise ValueError(f"no Monte Carlo sample of the toy finished ok{first}")
 
 
 __all__ = ["binomial_interval", "ekf_event_rates", "monte_carlo_metrics",
