@@ -64,10 +64,10 @@ def test_rates_and_metrics_count_what_they_say():
 
 
 def test_sweep_records_follow_the_main_run():
-    seeds, fixed = toy_mc.sweep_seeds_and_fixed({"seed": 3, "toy_seeds": 4, "mc_seeds": 5,
-                                                 "lateral": True, "n_steps": 10})
+    seeds, sample = toy_mc.sweep_seeds_and_params({"seed": 3, "toy_seeds": 4, "mc_seeds": 5,
+                                                   "lateral": True, "n_steps": 10})
     assert list(seeds) == [7, 8, 9, 10, 11]
-    assert fixed == {"toy_seeds": 1, "lateral": False, "n_steps": 10}
+    assert sample == {"seed": 3, "toy_seeds": 1, "mc_seeds": 5, "lateral": False, "n_steps": 10}
 
 
 def test_no_finished_sample_is_one_clear_error():

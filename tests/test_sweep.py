@@ -165,15 +165,15 @@ def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
     notebook's path): same table and metrics, bit for bit, as running the records in-process;
     and each sample's row is what ``run`` gives for that record alone."""
     from railpaper.experiments import quasi_gaussian_rbpf as qg
-    from railpaper.pipeline.sweep import sweep_samples
+    from railpaper.pipeline.sweep import notebook_sweep
     small = qg.SPEC.resolve(dict(n_particles=40, n_steps=30, grid_size=11, n_monte_carlo=3,
                                  record=2, timing=False), True)
     frames = []
 
     def on_workers(p, records, progress):
-        frame = sweep_samples(qg.SPEC.name, {"record": records},
-                              dict(p, n_monte_carlo=1, timing=False), tmp_path / "mc", quick=True,
-                              workers=1)
+        frame = notebook_sweep(qg.SPEC.name, dict(p, n_monte_carlo=1, timing=False), [p["seed"]],
+                               tmp_path / "mc", grid={"record": records}, quick=True,
+                               require_ok=True, workers=1)
         frames.append(frame)
         return frame.rename(columns={"record": "replicate"})
 

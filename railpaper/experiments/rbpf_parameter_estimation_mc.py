@@ -14,13 +14,11 @@ from scipy.stats import beta
 EVENTS = (("diverged", "ekf_diverged", "divergence"), ("biased", "ekf_biased", "biased"))
 
 
-def sweep_seeds_and_fixed(params: dict) -> tuple[range, dict]:
+def sweep_seeds_and_params(params: dict) -> tuple[range, dict]:
     """Seeds of the Monte Carlo toy records (after the main run's ``toy_seeds`` records, so none
-    repeats one of them) and the parameters every sample shares."""
+    repeats one of them) and the parameters of every sample (one toy record, no lateral part)."""
     first = params["seed"] + params["toy_seeds"]
-    fixed = {k: v for k, v in params.items() if k not in ("seed", "mc_seeds")}
-    fixed.update(toy_seeds=1, lateral=False)
-    return range(first, first + params["mc_seeds"]), fixed
+    return range(first, first + params["mc_seeds"]), dict(params, toy_seeds=1, lateral=False)
 
 
 def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -79,4 +77,4 @@ def _require_samples(ok: pd.DataFrame, sweep: pd.DataFrame | None = None) -> Non
 
 
 __all__ = ["binomial_interval", "ekf_event_rates", "monte_carlo_metrics",
-           "sweep_seeds_and_fixed"]
+           "sweep_seeds_and_params"]

@@ -147,6 +147,7 @@ def _notebook_logs_to(log_path: Path):
     for logger in loggers:
         logger.handlers = [handler]
         logger.propagate = False
+
     def restore():
         for logger, (propagate, handlers) in zip(loggers, saved):
             logger.handlers, logger.propagate = handlers, propagate

@@ -19,6 +19,7 @@ from __future__ import annotations
 import itertools
 import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -327,25 +328,28 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     return frame
 
 
-def sweep_samples(chapter: str, grid: dict[str, list], params: dict[str, Any],
-                  out_dir: str | Path, *, quick: bool = False,
-                  workers: int | None = None) -> pd.DataFrame:
-    """A chapter's Monte Carlo samples as a sweep, for a notebook: the rows, all ``ok``.
+def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
+                   out_dir: str | Path, *, grid: dict[str, list] | None = None,
+                   quick: bool = False, require_ok: bool = False,
+                   workers: int | None = None) -> pd.DataFrame:
+    """A chapter notebook's Monte Carlo samples as a fresh sweep, without progress lines.
 
-    Every sample is ``params`` (resolved chapter parameters, seed included) with one combination
-    of ``grid`` values; the samples run on local worker processes (at most two by default, so
-    that a notebook does not take a bigger machine's every core).
+    Every sample is ``params`` (the chapter's resolved parameters; its seed is ignored) with one
+    of ``seeds`` and one combination of ``grid`` values.  ``out_dir`` is emptied first: its
+    samples belong to this run's parameters.
 
     Raises
     ------
     PipelineError
-        If any sample failed (the first error is in the message).
+        With ``require_ok``, if any sample failed (the first error is in the message).
     """
+    grid = dict(grid or {})
     fixed = {k: v for k, v in params.items() if k not in grid and k != SEED_PARAMETER}
-    frame = run_sweep(chapter, grid, [params[SEED_PARAMETER]], out_dir, fixed=fixed, quick=quick,
-                      workers=workers or min(2, os.cpu_count() or 1), progress=False)
+    shutil.rmtree(out_dir, ignore_errors=True)
+    frame = run_sweep(chapter, grid, seeds, out_dir, fixed=fixed, quick=quick, workers=workers,
+                      progress=False)
     failed = frame[frame.status != "ok"]
-    if len(failed):
+    if require_ok and len(failed):
         raise PipelineError(f"{len(failed)} of {len(frame)} Monte Carlo samples of {chapter} "
                             f"failed; first: {failed.error.iloc[0]}")
     return frame
