@@ -139,6 +139,15 @@ class ChapterSpec:
             values[name] = self.parameter(name).coerce(value)
         return values
 
+    def check_notebook_values(self, params: dict[str, Any]) -> None:
+        """Refuse, for the chapter's notebook, values only sweep samples may take
+        (:attr:`notebook_requires`)."""
+        for name, needed in self.notebook_requires.items():
+            if params[name] != needed:
+                raise ParameterError(
+                    f"{name} = {str(params[name]).lower()} is for Monte Carlo samples (railpaper "
+                    f"sweep); the chapter's notebook needs {name} = {str(needed).lower()}")
+
     def defaults(self) -> dict[str, Any]:
         return {p.name: p.default for p in self.parameters}
 

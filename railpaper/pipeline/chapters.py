@@ -195,12 +195,7 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
 
     spec = chapter_spec(name)
     params = resolve_parameters(name, overrides, quick)
-    for parameter, needed in spec.notebook_requires.items():
-        if params[parameter] != needed:
-            raise ParameterError(
-                f"{parameter} = {str(params[parameter]).lower()} is for Monte Carlo samples "
-                f"(railpaper sweep); the chapter's notebook needs {parameter} = "
-                f"{str(needed).lower()}")
+    spec.check_notebook_values(params)
     out = Path(out_dir) if out_dir else default_output_dir(name)
     out = out.resolve()
     if out.exists() and not out.is_dir():
