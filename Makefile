@@ -7,7 +7,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 MATHJAX := book/_static/mathjax/node_modules/mathjax/es5/tex-chtml.js
 
-.PHONY: book book-quick test venv lock clean
+.PHONY: book book-quick test venv chromium lock clean
 
 venv: $(BIN)/railpaper $(MATHJAX)
 
@@ -28,7 +28,19 @@ book: venv
 book-quick: venv
 	$(BIN)/railpaper build --quick
 
-test: venv
+# The rendering test (tests/test_book.py) opens the built pages in headless Chromium: Debian's
+# package is installed when missing and we are root (or have sudo); otherwise one line says how.
+chromium:
+	@if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "make: installing Debian chromium for the rendering test"; \
+	  apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null; \
+	elif command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null && command -v apt-get >/dev/null 2>&1; then \
+	  echo "make: installing Debian chromium for the rendering test"; \
+	  sudo apt-get update -q >/dev/null && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null; \
+	else echo "make: the rendering test needs Chromium: run 'sudo apt-get install chromium' (Debian/Ubuntu), then 'make test' again" >&2; exit 1; fi
+
+test: venv chromium
 	$(BIN)/python -m pytest -q
 
 # Regenerate the hashed lock from pyproject.toml (needs uv: `pip install uv`).

@@ -1,0 +1,158 @@
+"""Monte Carlo evidence for the claims ledger: a statistic over seeds with its 95 % interval.
+
+Every interval here is deterministic (no resampling, no random numbers), so the same samples give
+the same bytes in ``metrics.json``:
+
+* :func:`median_interval` — the sample median with the distribution-free order-statistic interval
+  (the binomial(n, 1/2) quantiles pick the ranks);
+* :func:`proportion_interval` — a rate k/n with the Clopper–Pearson (exact binomial) interval;
+* :func:`mean_interval` — the mean with Student's t interval;
+* :func:`paired_trend` — a trend over ordered levels (speeds) measured on the same seeds: the
+  per-seed Spearman correlation between level and value, its median with an order-statistic
+  interval, and the two-sided sign-test p-value of "as many seeds rise as fall".
+
+``evidence_metrics`` turns one of these into the ``<name>``, ``<name>_low``, ``<name>_high`` and
+``<name>_n`` metrics a claim rule reads (``primary``, ``interval``, ``n_samples``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats as _st
+
+LEVEL = 0.95
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A statistic of ``n`` Monte Carlo samples with its ``level`` interval [low, high]."""
+
+    value: float
+    low: float
+    high: float
+    n: int
+    level: float = LEVEL
+
+    def metrics(self, name: str) -> dict[str, float | int]:
+        """``{name, name_low, name_high, name_n}`` for ``metrics.json``."""
+        return {name: self.value, f"{name}_low": self.low, f"{name}_high": self.high,
+                f"{name}_n": self.n}
+
+
+def _finite(samples, what: str) -> np.ndarray:
+    x = np.asarray(samples, dtype=float).ravel()
+    if x.size == 0:
+        raise ValueError(f"{what}: no samples")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{what}: samples must be finite (use a rate for 'never happened')")
+    return x
+
+
+def median_interval(samples, level: float = LEVEL) -> Estimate:
+    """Sample median with its distribution-free order-statistic confidence interval.
+
+    The interval is [x_(r), x_(n+1-r)] (1-based order statistics) with the largest r such that
+    P(Binomial(n, 1/2) <= r - 1) <= (1 - level) / 2, so its coverage of the population median is
+    at least ``level`` for any continuous distribution.  When n is too small for that (n <= 5 at
+    95 %), the interval is [min, max] and covers with probability 1 - 2^(1-n) only.
+
+    Parameters
+    ----------
+    samples : array_like
+        Finite values, one per Monte Carlo sample.
+    level : float
+        Confidence level.
+    """
+    x = np.sort(_finite(samples, "median_interval"))
+    n = x.size
+    # largest r >= 1 with P(B <= r-1) <= alpha/2, B ~ Binomial(n, 1/2)
+    r = int(_st.binom.ppf((1 - level) / 2, n, 0.5))      # smallest k with cdf(k) >= alpha/2
+    if _st.binom.cdf(r, n, 0.5) > (1 - level) / 2:
+        r -= 1                                          # now cdf(r) <= alpha/2 (or r = -1)
+    r = max(r + 1, 1)                                   # rank of the lower end, 1-based
+    return Estimate(float(np.median(x)), float(x[r - 1]), float(x[n - r]), n, level)
+
+
+def proportion_interval(k: int, n: int, level: float = LEVEL) -> Estimate:
+    """Rate k/n with the Clopper–Pearson (exact binomial) interval."""
+    if n <= 0 or not 0 <= k <= n:
+        raise ValueError(f"proportion_interval: need 0 <= k <= n and n > 0, got k={k}, n={n}")
+    alpha = 1 - level
+    low = 0.0 if k == 0 else float(_st.beta.ppf(alpha / 2, k, n - k + 1))
+    high = 1.0 if k == n else float(_st.beta.ppf(1 - alpha / 2, k + 1, n - k))
+    return Estimate(k / n, low, high, int(n), level)
+
+
+def mean_interval(samples, level: float = LEVEL) -> Estimate:
+    """Sample mean with Student's t interval (a single sample: the interval is the value)."""
+    x = _finite(samples, "mean_interval")
+    n = x.size
+    mean = float(x.mean())
+    if n == 1:
+        return Estimate(mean, mean, mean, 1, level)
+    half = float(_st.t.ppf(0.5 + level / 2, n - 1) * x.std(ddof=1) / np.sqrt(n))
+    return Estimate(mean, mean - half, mean + half, n, level)
+
+
+@dataclass(frozen=True)
+class Trend:
+    """A trend over ordered levels measured on the same seeds (see :func:`paired_trend`).
+
+    Attributes
+    ----------
+    rho : Estimate
+        Median over seeds of the per-seed Spearman correlation (level order vs value), with its
+        order-statistic interval.
+    rising, falling : int
+        Seeds whose correlation is > 0 / < 0.
+    sign_p : float
+        Two-sided sign-test p-value of rising vs falling (ties dropped; 1.0 when all tie).
+    """
+
+    rho: Estimate
+    rising: int
+    falling: int
+    sign_p: float
+
+    def metrics(self, name: str) -> dict[str, float | int]:
+        """``{name, name_low, name_high, name_n, name_sign_p, name_rising_fraction}``."""
+        out = self.rho.metrics(name)
+        out[f"{name}_sign_p"] = self.sign_p
+        out[f"{name}_rising_fraction"] = self.rising / self.rho.n
+        return out
+
+
+def paired_trend(values, level: float = LEVEL) -> Trend:
+    """Trend of a quantity over ordered levels, paired by seed.
+
+    Parameters
+    ----------
+    values : array_like, shape (n_seeds, n_levels)
+        ``values[i, j]``: the quantity on seed i at level j (levels in increasing order, e.g.
+        speeds).  Each row is one paired experiment (same track and noise seed at every level).
+
+    Returns
+    -------
+    Trend
+        Per-seed Spearman ρ(level, value) summarised over seeds.  A row whose values are all
+        equal has ρ = 0 (no trend).
+    """
+    v = np.asarray(values, dtype=float)
+    if v.ndim != 2 or v.shape[1] < 2:
+        raise ValueError(f"paired_trend: need shape (n_seeds, n_levels >= 2), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("paired_trend: values must be finite")
+    levels = np.arange(v.shape[1])
+    rhos = []
+    for row in v:
+        if np.all(row == row[0]):
+            rhos.append(0.0)
+        else:
+            rhos.append(float(_st.spearmanr(levels, row).statistic))
+    rhos = np.asarray(rhos)
+    rising, falling = int(np.sum(rhos > 0)), int(np.sum(rhos < 0))
+    m = rising + falling
+    p = 1.0 if m == 0 else float(_st.binomtest(rising, m, 0.5).pvalue)
+    return Trend(median_interval(rhos, level), rising, falling, p)
