@@ -1,4 +1,4 @@
-"""The ``railpaper`` command: list, run, check, sweep, build, track, bench.
+"""The ``railpaper`` command: list, run, check, sweep, bands, build, track, bench.
 
 Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
 no traceback.
@@ -119,6 +119,21 @@ def cmd_sweep(args) -> int:
     return 1 if failed else 0
 
 
+def cmd_bands(args) -> int:
+    from railpaper.pipeline.bands import compute_bands, write_bands
+    from railpaper.pipeline.chapters import chapter_spec
+    chapter_spec(args.chapter)
+    if args.stride < 1:
+        raise ValueError(f"--stride must be >= 1, got {args.stride}")
+    if args.out is not None and (not args.out.parent.is_dir() or args.out.is_dir()):
+        raise ValueError(f"bands --out {args.out}: no such directory to write into, or a directory")
+    bands = compute_bands(args.chapter, args.quick, args.batches, args.stride, args.work)
+    target = write_bands(args.chapter, args.quick, bands, None if args.write else args.out)
+    print(f"railpaper: {len(bands)} {'quick' if args.quick else 'full'} bands of {args.chapter} "
+          f"written to {target}")
+    return 0
+
+
 def cmd_build(args) -> int:
     from railpaper.pipeline.book import build_book
     html = build_book(args.quick, args.book_dir)
@@ -196,6 +211,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", help="dask scheduler address, e.g. tcp://host:8786")
     p.set_defaults(func=cmd_sweep)
+
+    p = sub.add_parser("bands", help="CI tolerance bands of a chapter from disjoint seed batches")
+    p.add_argument("chapter")
+    p.add_argument("--quick", action="store_true", help="bands of the quick sizes")
+    p.add_argument("--batches", type=int, default=10, help="chapter runs (default 10)")
+    p.add_argument("--stride", type=int, default=1000,
+                   help="batch k runs with seed = k * stride (default 1000)")
+    p.add_argument("--work", type=Path, help="where the batch runs go (default runs/bands-...); "
+                   "finished batches there are reused")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--out", type=Path, help="write a tolerances file here")
+    target.add_argument("--write", action="store_true",
+                        help="replace this mode's bands in data/<chapter>/tolerances.toml")
+    p.set_defaults(func=cmd_bands)
 
     p = sub.add_parser("build", help="run every chapter, then build the book strictly")
     p.add_argument("--quick", action="store_true")

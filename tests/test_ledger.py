@@ -1,5 +1,7 @@
-"""The claims ledger on hand-made claims and metrics: verdict rules, missing metrics, non-default runs."""
+"""The claims ledger on hand-made claims and metrics: verdict vocabulary, readings, missing
+metrics, non-default runs, the shared chapter table and the CSV."""
 
+import csv
 import json
 import re
 
@@ -8,61 +10,75 @@ import pytest
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.chapters import book_chapters
 from railpaper.pipeline.outputs import chapter_data_dir
-from railpaper.pipeline.ledger import (VERDICTS, build_ledger, chapter_rows, judge, ledger_counts,
-                                       ledger_markdown)
+from railpaper.pipeline.ledger import (CSV_COLUMNS, VERDICTS, LedgerRow, build_ledger,
+                                       chapter_rows, chapter_table, judge, ledger_counts,
+                                       ledger_markdown, write_ledger_csv)
 
 CLAIMS_TOML = """
 [fast]
 claim = "converges in about 0.15 s"
 source = "toy paper, p. 1"
+rule = "reproduced if the median is within 0.05 s of 0.15 s"
 paper_value = 0.15
 unit = "s"
-metrics = ["t_60", "t_160"]
-primary = "t_160"
+primary = "t_med"
+interval = ["t_low", "t_high"]
+n_samples = "t_n"
+statistic = "median over seeds"
 [[fast.cases]]
 verdict = "reproduced"
-reason = "t = {t_60:.2f}-{t_160:.2f} s"
-when = [{test = "within_abs", metrics = ["t_60", "t_160"], tolerance = 0.05}]
+reason = "t = {t_med:.2f} s"
+when = [{test = "within_abs", metrics = ["t_med"], tolerance = 0.05}]
 [[fast.cases]]
-verdict = "differs"
+verdict = "artefact"
 reason = "only the slow variant: {t_slow:.2f} s"
 when = [{test = "within_abs", metrics = ["t_slow"], tolerance = 0.05}]
 [fast.otherwise]
-reason = "t = {t_160:.2f} s"
+reason = "t = {t_med:.2f} s"
 
 [trend]
 claim = "error grows with speed"
 source = "toy paper, p. 2"
-metrics = ["e_60", "e_160"]
-primary = "e_160"
+rule = "reproduced if the rho interval lies above 0"
+primary = "rho"
+n_samples = "rho_n"
 [[trend.cases]]
 verdict = "reproduced"
 reason = "grows"
-when = [{test = "increasing", metrics = ["e_60", "e_160"]}]
+when = [{test = "range", metrics = ["rho_low"], above = 0}]
 
-[step]
-claim = "converges at step 4"
-source = "toy paper, p. 3"
-paper_value = 4
-unit = "step"
-metrics = ["step"]
-primary = "step"
-[[step.cases]]
+[trend_printed]
+claim = "error grows with speed"
+group = "trend"
+reading = "as printed"
+source = "toy paper, p. 2"
+rule = "same, on the printed equation"
+primary = "rho_printed"
+deterministic = true
+[[trend_printed.cases]]
 verdict = "reproduced"
-reason = "step {step}"
-when = [{test = "within_factor", metrics = ["step"], factor = 3}]
+reason = "grows"
+when = [{test = "range", metrics = ["rho_printed"], above = 0}]
 
 [timing]
 claim = "56 % faster"
 source = "toy paper, p. 4"
+rule = "ratio below 0.6"
 paper_value = 56
 unit = "%"
-metrics = ["ratio"]
 primary = "ratio"
+n_samples = "ratio_n"
 [[timing.cases]]
 verdict = "reproduced"
 reason = "ratio {ratio:.2f}"
 when = [{test = "range", metrics = ["ratio"], below = 0.6}]
+
+[lost]
+claim = "agrees with line data"
+source = "toy paper, p. 5"
+[lost.otherwise]
+verdict = "not testable"
+reason = "the line data are not published"
 """
 
 DEFAULTS = {"seed": 0, "speeds_kmh": [60.0, 160.0]}
@@ -81,75 +97,79 @@ def toy(tmp_path):
         (out / "metrics.json").write_text(json.dumps(run))
         if timings is not None:
             (out / "timings.json").write_text(json.dumps({"metrics": timings}))
-        rows = build_ledger(["toy"], tmp_path / "chapters", tmp_path / "data",
-                            defaults=lambda chapter, quick: DEFAULTS)
+        rows = build_ledger(["toy"], tmp_path / "chapters", tmp_path / "data")
         return {r.key: r for r in rows}
     return write_run
 
 
-GOOD = {"t_60": 0.12, "t_160": 0.19, "t_slow": 0.5, "e_60": 1.0, "e_160": 2.0, "step": 11}
+GOOD = {"t_med": 0.12, "t_low": 0.1, "t_high": 0.13, "t_n": 20, "t_slow": 0.5,
+        "rho": 0.8, "rho_low": 0.2, "rho_n": 20, "rho_printed": 0.5, "ratio_n": 5}
 
 
-def test_every_rule_reproduced_with_reasons_formatted(toy):
+def test_every_rule_and_vocabulary(toy):
     rows = toy(GOOD, timings={"ratio": 0.44})
-    assert {k: r.verdict for k, r in rows.items()} == dict.fromkeys(rows, "reproduced")
-    assert rows["fast"].reason == "t = 0.12-0.19 s"
-    assert rows["fast"].paper == "0.15 s" and rows["fast"].ours == "0.19 s"
+    assert {k: r.verdict for k, r in rows.items()} == dict(
+        dict.fromkeys(rows, "reproduced"), lost="not testable")
+    assert rows["fast"].reason == "t = 0.12 s"
+    assert rows["fast"].paper == "0.15 s" and rows["fast"].ours == "0.12 s [0.1, 0.13], n = 20"
+    assert (rows["fast"].ours_low, rows["fast"].ours_high, rows["fast"].n_samples) == (0.1, 0.13, 20)
     assert rows["timing"].reason == "ratio 0.44"   # looked up in timings.json
     assert rows["trend"].paper == "(no number)"
+    assert rows["trend_printed"].group == "trend" and rows["trend_printed"].reading == "as printed"
+    assert rows["lost"].reason == "the line data are not published"
 
 
-@pytest.mark.parametrize("change, key, reason", [
-    ({"t_160": 0.2001}, "fast", "t = 0.20 s"),                   # just outside ±0.05
-    ({"t_160": 0.21, "t_slow": 0.16}, "fast", "only the slow variant: 0.16 s"),  # second case
-    ({"e_160": 1.0}, "trend", ""),                                 # equal is not increasing
-    ({"step": 13}, "step", ""),                                     # 13 > 3 * 4
-    ({"step": -1}, "step", ""),                                     # never converged
+@pytest.mark.parametrize("change, key, verdict, reason", [
+    ({"t_med": 0.2001}, "fast", "differs", "t = 0.20 s"),          # just outside ±0.05
+    ({"t_med": 0.21, "t_slow": 0.16}, "fast", "artefact", "only the slow variant: 0.16 s"),
+    ({"rho_low": 0.0}, "trend", "differs", ""),                     # 'above' is strict
 ])
-def test_differs_when_a_rule_fails(toy, change, key, reason):
+def test_rule_outcomes(toy, change, key, verdict, reason):
     rows = toy(dict(GOOD, **change), timings={"ratio": 0.44})
-    assert rows[key].verdict == "differs"
-    assert rows[key].reason == reason
-    assert all(r.verdict == "reproduced" for k, r in rows.items() if k != key)
-
-
-def test_bounds_are_inclusive_or_strict_as_named(toy):
-    assert toy(dict(GOOD, step=12), timings={"ratio": 0.6})["step"].verdict == "reproduced"
-    assert toy(dict(GOOD, step=12), timings={"ratio": 0.6})["timing"].verdict == "differs"
+    assert (rows[key].verdict, rows[key].reason) == (verdict, reason)
+    assert all(r.verdict in ("reproduced", "not testable") for k, r in rows.items() if k != key)
 
 
 def test_missing_metric_and_missing_run(toy, tmp_path):
     rows = toy({k: v for k, v in GOOD.items() if k != "t_slow"}, timings={})
     assert rows["fast"].verdict == "missing" and "t_slow" in rows["fast"].reason
     assert rows["timing"].verdict == "missing" and rows["timing"].ours == "-"
-    assert rows["step"].verdict == "reproduced"
-    rows = chapter_rows("toy", read_toml(tmp_path / "data/toy/claims.toml"), None,
-                        defaults=lambda quick: DEFAULTS)
+    assert rows["trend"].verdict == "reproduced"
+    rows = chapter_rows("toy", read_toml(tmp_path / "data/toy/claims.toml"), None)
     assert {r.verdict for r in rows} == {"missing"}
 
 
-def test_non_default_parameters_are_not_comparable(toy):
-    rows = toy(GOOD, parameters=dict(DEFAULTS, seed=3), timings={"ratio": 0.44})
-    assert {r.verdict for r in rows.values()} == {VERDICTS[2]}
-    assert rows["fast"].reason.startswith("run with non-default seed;")
-    assert rows["fast"].ours == "0.19 s"  # still shown
+def test_non_default_parameters_noted_and_judged(monkeypatch, tmp_path):
+    from railpaper.pipeline import ledger
+    chapter = book_chapters()[0]
+    defaults = ledger.chapter_spec(chapter).resolve({}, True)
+    run = {"parameters": dict(defaults, seed=7), "quick": True}
+    assert ledger.non_default_note(chapter, run).startswith("Non-default parameters: seed.")
+    assert ledger.non_default_note(chapter, {"parameters": defaults, "quick": True}) == ""
 
 
-def test_claim_without_rule_is_a_data_error(tmp_path):
-    claims = {"bare": {"claim": "x", "metrics": ["a"]}}
-    with pytest.raises(DataError, match="claim 'bare' needs 'primary'"):
-        chapter_rows("toy", claims, {"metrics": {"a": 1}, "parameters": {}},
-                     defaults=lambda quick: {})
-    claims = {"bad": {"claim": "x", "primary": "a",
-                      "cases": [{"verdict": "reproduced", "reason": "",
-                                 "when": [{"test": "close_to", "metrics": ["a"]}]}]}}
+def test_rows_need_a_documented_rule():
+    bare = {"bare": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "cases": [
+        {"verdict": "reproduced", "reason": "", "when": []}]}}
+    with pytest.raises(DataError, match="needs 'n_samples'"):
+        chapter_rows("toy", bare, {"metrics": {"a": 1}})
+    norule = {"x": {"claim": "x", "source": "p", "primary": "a", "deterministic": True,
+                    "cases": [{"verdict": "reproduced", "reason": ""}]}}
+    with pytest.raises(DataError, match="needs 'rule'"):
+        chapter_rows("toy", norule, {"metrics": {"a": 1}})
+    badverdict = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a",
+                        "deterministic": True, "cases": [{"verdict": "reproduced*", "reason": ""}]}}
+    with pytest.raises(DataError, match="verdict in reproduced, artefact, differs, not testable"):
+        chapter_rows("toy", badverdict, {"metrics": {"a": 1}})
+    badtest = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "deterministic": True,
+                     "cases": [{"verdict": "reproduced", "reason": "",
+                                "when": [{"test": "close_to", "metrics": ["a"]}]}]}}
     with pytest.raises(DataError, match="unknown test 'close_to'"):
-        chapter_rows("toy", claims, {"metrics": {"a": 1}, "parameters": {}},
-                     defaults=lambda quick: {})
+        chapter_rows("toy", badtest, {"metrics": {"a": 1}})
 
 
 def test_equals_reference_metric_and_non_strict_increasing():
-    claim = {"paper_value": True, "primary": "a", "cases": [
+    claim = {"paper_value": True, "primary": "a", "deterministic": True, "cases": [
         {"verdict": "reproduced", "reason": "eq", "when": [{"test": "equals", "metrics": ["flag"]}]},
         {"verdict": "reproduced", "reason": "near b",
          "when": [{"test": "within_factor", "metrics": ["a"], "reference": "b", "factor": 2}]},
@@ -162,33 +182,47 @@ def test_equals_reference_metric_and_non_strict_increasing():
     assert judge(claim, {"flag": False, "a": 90.0, "b": 9.0}) == ("differs", "")
 
 
-def test_markdown_links_every_row_and_counts(toy):
-    rows = list(toy(dict(GOOD, step=13), timings={"ratio": 0.44}).values())
+def test_markdown_counts_badges_and_chapter_table_shared(toy):
+    rows = list(toy(dict(GOOD, rho_low=-0.1), timings={"ratio": 0.44}).values())
     text = ledger_markdown(rows, {"toy": "Toy chapter"})
-    assert text.startswith("4 claims: 3 reproduced, 1 differs.")
-    assert "**{ref}`Toy chapter <claims-toy>`** — 3 reproduced, 1 differs" in text
-    assert text.count("({ref}`chapter <claims-toy>`) |") == 4      # every reason links
-    assert ledger_counts(rows) == {"toy": dict(zip(VERDICTS, (3, 1, 0, 0)))}
+    assert text.startswith("5 claims and readings: 3 reproduced, 1 differs, 1 not testable.")
+    assert "**{ref}`Toy chapter <claims-toy>`** — 3 reproduced, 1 differs, 1 not testable" in text
+    assert chapter_table(rows) in text                 # the chapter renders the very same table
+    assert text.count('<span class="verdict verdict-reproduced">') == 3
+    assert '<span class="verdict verdict-not-testable">∅ not testable</span>' in text
+    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 1, 1, 0)))
 
 
 def test_markdown_escapes_table_breakers():
-    from railpaper.pipeline.ledger import LedgerRow
     row = LedgerRow("toy", "k", "a | b", "s", "$1", "2", "differs", "x | y")
-    line = ledger_markdown([row]).splitlines()[-1]
-    assert len(re.findall(r"(?<!\\)\|", line)) == 6     # five columns, pipes inside escaped
+    line = chapter_table([row]).splitlines()[-1]
+    assert len(re.findall(r"(?<!\\)\|", line)) == 7     # six columns, pipes inside escaped
     assert "a \\| b" in line and "x \\| y" in line and "\\$1" in line
+
+
+def test_ledger_csv_columns_and_numbers(toy, tmp_path):
+    rows = list(toy(GOOD, timings={"ratio": 0.44}).values())
+    path = write_ledger_csv(rows, tmp_path / "ledger.csv")
+    with path.open() as handle:
+        table = list(csv.DictReader(handle))
+    assert list(table[0]) == CSV_COLUMNS and len(table) == 5
+    fast = table[0]
+    assert (fast["claim"], fast["reading"], fast["verdict"]) == (
+        "converges in about 0.15 s", "as stated", "reproduced")
+    assert float(fast["ours"]) == 0.12 and float(fast["ours_high"]) == 0.13
+    assert int(fast["n_samples"]) == 20 and float(fast["paper_value"]) == 0.15
+    assert table[4]["verdict"] == "not testable" and table[4]["ours"] == ""
 
 
 @pytest.mark.parametrize("chapter", book_chapters())
 def test_repository_claims_all_have_rules(chapter):
-    """Every claim of the four chapters can be judged (a run without metrics: all 'missing')."""
+    """Every row of the four chapters can be judged (a run without metrics: 'missing')."""
     claims = read_toml(chapter_data_dir(chapter) / "claims.toml")
-    rows = chapter_rows(chapter, claims, {"metrics": {}, "parameters": {}, "quick": True},
-                        defaults=lambda quick: {})
-    assert len(rows) == len(claims) and {r.verdict for r in rows} == {"missing"}
-    for claim in claims.values():
-        assert claim.get("justification"), claim["claim"]
-        assert claim["primary"] in claim["metrics"]
+    rows = chapter_rows(chapter, claims, {"metrics": {}, "parameters": {}, "quick": True})
+    assert len(rows) == len(claims)
+    assert {r.verdict for r in rows} <= {"missing", "not testable"}
+    for row in claims.values():
+        assert row.get("justification") or row.get("otherwise", {}).get("verdict") == "not testable"
 
 
 def test_toc_lists_appendix_pages_that_exist(tmp_path):

@@ -12,7 +12,8 @@ Tolerance file::
     ...
 
 A metric outside its band fails the check; an unreproduced paper claim never does (claims are
-shown beside the metrics for information).  A run whose parameters differ from the defaults the
+shown beside the metrics for information).  A band for a metric that ``metrics.json`` lacks is
+checked against ``timings.json`` (wall-clock evidence, e.g. a time ratio).  A run whose parameters differ from the defaults the
 tolerances were set for is "not comparable".
 """
 
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.chapters import chapter_spec, default_output_dir
+from railpaper.pipeline.claim_rules import rule_metrics
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 
@@ -59,10 +61,12 @@ def _claims_by_metric(chapter: str) -> dict[str, str]:
     out = {}
     for table in claims(chapter).values():
         text = table.get("claim", "")
+        if table.get("reading"):
+            text += f" [{table['reading']}]"
         if "paper_value" in table:
             text += f" (paper: {table['paper_value']} {table.get('unit', '')})".rstrip()
-        for metric in table.get("metrics", []):
-            out[metric] = text
+        for metric in rule_metrics(table):
+            out.setdefault(metric, text)
     return out
 
 
@@ -94,9 +98,13 @@ def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[Check
                          "not comparable: parameters differ from the defaults of the tolerances")]
     bands = load_tolerances(chapter)["quick" if quick else "full"]
     claim_text = _claims_by_metric(chapter)
+    timings_path = path.with_name("timings.json")
+    values = dict(json.loads(timings_path.read_text()).get("metrics", {})) \
+        if timings_path.exists() else {}
+    values.update(run["metrics"])
     rows = []
     for metric, (low, high, _source) in sorted(bands.items()):
-        value = run["metrics"].get(metric)
+        value = values.get(metric)
         band = f"[{low:g}, {high:g}]"
         if value is None:
             status = "FAIL (missing)"

@@ -1,58 +1,46 @@
-"""The claims ledger: every number the papers state, ours beside it, and a verdict.
+"""The claims ledger: every claim the papers make about their results, our evidence, a verdict.
 
-Each chapter's ``data/<chapter>/claims.toml`` holds, per claim, the paper's statement and how a
-run decides it (nothing here is specific to a claim)::
+``data/<chapter>/claims.toml`` is the only place a verdict is decided (schema and rule tests in
+:mod:`railpaper.pipeline.claim_rules`); this module evaluates those rules on a run's
+``metrics.json`` (then ``timings.json`` for wall-clock claims) and renders the rows.  The book's
+intro and each chapter's claims section call the same :func:`chapter_table`, so they cannot
+disagree; ``railpaper build`` also writes ``_generated/claims_ledger.csv``.
 
-    [convergence_time]
-    claim = "the observer converges after about 0.15 s"
-    source = "paper 000, abstract"
-    paper_value = 0.15
-    unit = "s"
-    metrics = ["convergence_time_s_60kmh", ...]          # shown by the chapter and `railpaper check`
-    primary = "convergence_time_s_60kmh"                  # "ours" in the ledger
-    justification = "why this rule and tolerance (paper text, our numbers)"
-    [[convergence_time.cases]]                            # tried in order; the first that holds
-    verdict = "reproduced"                                # reproduced | differs
-    reason = "... {convergence_time_s_60kmh:.3f} s ..."   # str.format over the run's metrics
-    when = [{test = "within_abs", metrics = [...], tolerance = 0.05}]
-    [convergence_time.otherwise]                          # verdict "differs" unless stated
-    reason = "..."
-
-Tests of a condition (all ``metrics`` of it must pass; the reference is ``reference`` (a metric),
-else ``value``, else the claim's ``paper_value``):
-
-* ``within_abs``: ``|m - ref| <= tolerance``;
-* ``within_factor``: ``m > 0`` and ``ref / factor <= m <= ref * factor``;
-* ``range``: ``min <= m <= max`` and ``above < m < below`` (any of the four bounds);
-* ``equals``: ``m == ref``;
-* ``increasing``: the metrics, in order, strictly increase (``strict = false``: never decrease).
-
-A run whose parameters differ from the chapter's defaults is "not comparable"; a claim whose
-metrics the run lacks is "missing".  Metrics are looked up in ``metrics.json``, then in
-``timings.json`` (wall-clock claims).
+Verdicts (defined for readers in the intro): ``reproduced``, ``artefact``, ``differs``,
+``not testable``; and two states of a run rather than of a claim: ``missing`` (the chapter has
+not been run, or its run lacks a metric the rule reads) and, for rows built from a run with
+non-default parameters, the verdict is this run's and the table says so.
 """
 
 from __future__ import annotations
 
+import csv
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-import pandas as pd
-
-from railpaper.data import DataError, read_toml
+from railpaper.data import read_toml
 from railpaper.pipeline.chapters import chapter_spec
+from railpaper.pipeline.claim_rules import (RULE_VERDICTS, check_row, is_untestable, rule_metrics,
+                                            verdict_on_run)
 
-VERDICTS = ("reproduced", "differs", "not comparable (non-default parameters)", "missing")
-TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
-LEDGER_COLUMNS = ["chapter", "claim", "source", "paper", "ours", "verdict", "reason"]
+VERDICTS = RULE_VERDICTS + ("missing",)
+#: HTML of each verdict in the tables: a coloured badge with an icon (book/_static/verdicts.css).
+VERDICT_ICONS = {"reproduced": "✔", "artefact": "⚠", "differs": "✘", "not testable": "∅",
+                 "missing": "?"}
+CSV_COLUMNS = ["chapter", "claim", "reading", "paper_value", "ours", "ours_low", "ours_high",
+               "n_samples", "verdict", "reason"]
 
 
 @dataclass
 class LedgerRow:
-    """One paper claim beside our number."""
+    """One paper claim, under one reading, beside our evidence.
+
+    ``ours`` is the display text of the statistic the verdict is decided on (with its interval);
+    ``ours_value``, ``ours_low``, ``ours_high`` and ``n_samples`` are the numbers behind it (None
+    where the row has none, e.g. not testable or deterministic).
+    """
 
     chapter: str
     key: str
@@ -62,6 +50,14 @@ class LedgerRow:
     ours: str
     verdict: str
     reason: str
+    reading: str = ""
+    group: str = ""
+    statistic: str = ""
+    paper_value: object = None
+    ours_value: object = None
+    ours_low: object = None
+    ours_high: object = None
+    n_samples: object = None
 
 
 def claims_label(chapter: str) -> str:
@@ -69,55 +65,10 @@ def claims_label(chapter: str) -> str:
     return f"claims-{chapter}"
 
 
-def _referenced(claim: dict) -> list[str]:
-    names = [claim["primary"]] if "primary" in claim else []
-    for case in claim.get("cases", []):
-        for cond in case.get("when", []):
-            names += list(cond.get("metrics", []))
-            if "reference" in cond:
-                names.append(cond["reference"])
-    return list(dict.fromkeys(names))
-
-
-def _check_claim(key: str, claim: dict, where: str) -> None:
-    """Raise DataError (one line) for a claim without a usable verdict rule."""
-    if "primary" not in claim or not claim.get("cases"):
-        raise DataError(f"{where}: claim '{key}' needs 'primary' and at least one [[cases]]")
-    for case in claim["cases"]:
-        if case.get("verdict") not in ("reproduced", "differs") or "reason" not in case:
-            raise DataError(f"{where}: claim '{key}': each case needs verdict "
-                            "(reproduced or differs) and a reason")
-        for cond in case.get("when", []):
-            if cond.get("test") not in TESTS:
-                raise DataError(f"{where}: claim '{key}': unknown test {cond.get('test')!r} "
-                                f"(expected one of {', '.join(TESTS)})")
-            if not cond.get("metrics"):
-                raise DataError(f"{where}: claim '{key}': a condition needs 'metrics'")
-
-
-def _holds(cond: dict, claim: dict, values: dict) -> bool:
-    xs = [values[name] for name in cond["metrics"]]
-    test = cond["test"]
-    if test == "increasing":
-        pairs = list(zip(xs, xs[1:]))
-        return all(b > a if cond.get("strict", True) else b >= a for a, b in pairs)
-    if test == "range":
-        return all(cond.get("min", -math.inf) <= x <= cond.get("max", math.inf)
-                   and cond.get("above", -math.inf) < x < cond.get("below", math.inf) for x in xs)
-    ref = values[cond["reference"]] if "reference" in cond else cond.get(
-        "value", claim.get("paper_value"))
-    if test == "equals":
-        return all(x == ref for x in xs)
-    if test == "within_abs":
-        return all(abs(x - ref) <= cond["tolerance"] for x in xs)
-    factor = cond["factor"]
-    return all(x > 0 and ref / factor <= x <= ref * factor for x in xs)
-
-
 def _format(template: str, values: dict) -> str:
     try:
         return template.format_map(values)
-    except (KeyError, ValueError, IndexError, TypeError):
+    except (KeyError, ValueError, IndexError, TypeError, AttributeError):
         return template
 
 
@@ -132,69 +83,76 @@ def _show(value, unit: str = "") -> str:
     return f"{text} {unit}".strip()
 
 
-def judge(claim: dict, values: dict) -> tuple[str, str]:
-    """Verdict and reason of one claim on a run's metrics (no parameter check here).
+def _ours(row: dict, values: dict) -> tuple[str, object, object, object, object]:
+    """Display text and (value, low, high, n) of the row's statistic on a run."""
+    primary = row.get("primary")
+    if primary is None or primary not in values:
+        return ("-" if primary else "(no statistic)"), None, None, None, None
+    value = values[primary]
+    text = _show(value, row.get("primary_unit", row.get("unit", "")))
+    low = high = n = None
+    if "interval" in row and all(name in values for name in row["interval"]):
+        low, high = (values[name] for name in row["interval"])
+        text += f" [{_show(low)}, {_show(high)}]"
+    if "n_samples" in row and row["n_samples"] in values:
+        n = values[row["n_samples"]]
+        text += f", n = {n}"
+    elif row.get("deterministic"):
+        text += ", deterministic"
+    return text, value, low, high, n
 
-    Returns
-    -------
-    tuple[str, str]
-        ``("missing", ...)`` when a referenced metric is absent, else the first case that holds,
-        else the claim's ``otherwise`` (verdict "differs" unless it says otherwise).
+
+def judge(row: dict, values: dict) -> tuple[str, str]:
+    """Verdict and formatted reason of one row on a run's metric values.
+
+    ``("missing", ...)`` when a metric the rule reads is absent.
     """
-    absent = [name for name in _referenced(claim) if name not in values]
+    if is_untestable(row):
+        return "not testable", _format(row["otherwise"]["reason"], values)
+    absent = [name for name in rule_metrics(row) if name not in values]
     if absent:
         return "missing", f"the run has no metric {absent[0]}"
-    for case in claim["cases"]:
-        if all(_holds(cond, claim, values) for cond in case.get("when", [])):
-            return case["verdict"], _format(case["reason"], values)
-    fallback = claim.get("otherwise", {})
-    return fallback.get("verdict", "differs"), _format(fallback.get("reason", ""), values)
+    verdict, reason = verdict_on_run(row, values)
+    return verdict, _format(reason, values)
 
 
-def _changed_parameters(run: dict, defaults: dict) -> list[str]:
+def changed_parameters(run: dict, defaults: dict) -> list[str]:
+    """Names of the run's parameters whose values differ from ``defaults``."""
     params = run.get("parameters", {})
     return sorted(k for k in set(params) | set(defaults) if params.get(k) != defaults.get(k))
 
 
 def chapter_rows(chapter: str, claims: dict[str, dict], run: dict | None,
-                 timings: dict | None = None,
-                 defaults: Callable[[bool], dict] | None = None) -> list[LedgerRow]:
-    """The ledger rows of one chapter.
+                 timings: dict | None = None) -> list[LedgerRow]:
+    """The ledger rows of one chapter on one run.
 
     Parameters
     ----------
     chapter : str
         Chapter name.
     claims : dict
-        The chapter's ``claims.toml`` (checked: each claim needs ``primary`` and ``cases``).
+        The chapter's ``claims.toml`` (each row checked by :func:`claim_rules.check_row`).
     run : dict or None
-        The run's ``metrics.json`` (None: no run).
+        The run's ``metrics.json`` (None: the chapter has not been run).
     timings : dict, optional
         The run's ``timings.json``; its metrics are used for keys ``metrics.json`` lacks.
-    defaults : callable, optional
-        ``defaults(quick) -> parameters`` of a default run; default: the chapter's SPEC.
     """
-    defaults = defaults or (lambda quick: chapter_spec(chapter).resolve({}, quick))
     values = dict((timings or {}).get("metrics", {}))
     values.update((run or {}).get("metrics", {}))
-    changed = _changed_parameters(run, defaults(bool(run.get("quick")))) if run else []
     rows = []
-    for key, claim in claims.items():
-        _check_claim(key, claim, f"data/{chapter}/claims.toml")
-        paper = _show(claim["paper_value"], claim.get("unit", "")) if "paper_value" in claim \
+    for key, row in claims.items():
+        check_row(key, row, f"data/{chapter}/claims.toml")
+        paper = _show(row["paper_value"], row.get("unit", "")) if "paper_value" in row \
             else "(no number)"
-        primary = claim["primary"]
-        ours = _show(values[primary], claim.get("primary_unit", claim.get("unit", ""))) \
-            if primary in values else "-"
+        ours, value, low, high, n = _ours(row, values)
         if run is None:
             verdict, reason = "missing", "the chapter has not been run"
         else:
-            verdict, reason = judge(claim, values)
-            if changed and verdict != "missing":
-                verdict = VERDICTS[2]
-                reason = f"run with non-default {', '.join(changed)}; " + reason
-        rows.append(LedgerRow(chapter, key, claim["claim"], claim.get("source", ""), paper, ours,
-                              verdict, reason))
+            verdict, reason = judge(row, values)
+        rows.append(LedgerRow(chapter, key, row["claim"], row.get("source", ""), paper, ours,
+                              verdict, reason, row.get("reading", ""), row.get("group", key),
+                              row.get("statistic", ""), row.get("paper_value"), value, low,
+                              high, n))
     return rows
 
 
@@ -202,54 +160,102 @@ def _read_json(path: Path) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
-def build_ledger(chapters: list[str], chapters_dir: str | Path, data_dir: str | Path | None = None,
-                 defaults: Callable[[str, bool], dict] | None = None) -> list[LedgerRow]:
-    """Ledger rows of several chapters from ``chapters_dir/<chapter>/{metrics,timings}.json``.
-
-    ``data_dir`` holds ``<chapter>/claims.toml`` (default: the repository's ``data/``);
-    ``defaults(chapter, quick)`` gives a default run's parameters (default: the chapter's SPEC).
-    """
+def run_rows(chapter: str, out_dir: str | Path, data_dir: str | Path | None = None
+             ) -> tuple[list[LedgerRow], dict | None]:
+    """Ledger rows of the run in ``out_dir`` and its ``metrics.json`` (None if not run)."""
     from railpaper.data import DATA_DIR
     data = Path(data_dir) if data_dir else DATA_DIR
+    out = Path(out_dir)
+    run = _read_json(out / "metrics.json")
+    rows = chapter_rows(chapter, read_toml(data / chapter / "claims.toml"), run,
+                        _read_json(out / "timings.json"))
+    return rows, run
+
+
+def build_ledger(chapters: list[str], chapters_dir: str | Path,
+                 data_dir: str | Path | None = None) -> list[LedgerRow]:
+    """Ledger rows of several chapters from ``chapters_dir/<chapter>/{metrics,timings}.json``."""
     rows = []
     for chapter in chapters:
-        out = Path(chapters_dir) / chapter
-        chapter_defaults = (lambda quick, c=chapter: defaults(c, quick)) if defaults else None
-        rows += chapter_rows(chapter, read_toml(data / chapter / "claims.toml"),
-                             _read_json(out / "metrics.json"), _read_json(out / "timings.json"),
-                             chapter_defaults)
+        rows += run_rows(chapter, Path(chapters_dir) / chapter, data_dir)[0]
     return rows
 
 
-def ledger_frame(rows: list[LedgerRow]) -> pd.DataFrame:
-    """The ledger as a table (columns ``LEDGER_COLUMNS``), e.g. for a chapter notebook."""
-    return pd.DataFrame([[getattr(r, c) for c in LEDGER_COLUMNS] for r in rows],
-                        columns=LEDGER_COLUMNS)
-
+# ---- rendering ----------------------------------------------------------------------------
 
 def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ").replace("$", "\\$")
 
 
-def _summary(rows: list[LedgerRow]) -> str:
+def verdict_badge(verdict: str) -> str:
+    """Inline HTML of a verdict: icon and word in a coloured badge."""
+    css = verdict.replace(" ", "-")
+    return (f'<span class="verdict verdict-{css}">{VERDICT_ICONS.get(verdict, "")} '
+            f"{verdict}</span>")
+
+
+def summary(rows: list[LedgerRow]) -> str:
+    """``"3 reproduced, 1 differs"``: verdict counts in vocabulary order."""
     counts = {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
     return ", ".join(f"{n} {v}" for v, n in counts.items() if n)
 
 
+def chapter_table(rows: list[LedgerRow]) -> str:
+    """The MyST table of one chapter's rows: the same text in the intro and in the chapter."""
+    lines = ["| paper claim | reading | paper | ours: statistic [95 % interval], n | verdict | why |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        ours = r.ours + (f" — {r.statistic}" if r.statistic and r.ours not in ("-",) else "")
+        lines.append(f"| {_cell(r.claim)} ({_cell(r.source)}) | {_cell(r.reading or 'as stated')} "
+                     f"| {_cell(r.paper)} | {_cell(ours)} | {verdict_badge(r.verdict)} "
+                     f"| {_cell(r.reason)} |")
+    return "\n".join(lines) + "\n"
+
+
+def non_default_note(chapter: str, run: dict | None) -> str:
+    """One sentence when the run's parameters are not the chapter's defaults, else ''."""
+    if not run:
+        return ""
+    defaults = chapter_spec(chapter).resolve({}, bool(run.get("quick")))
+    changed = changed_parameters(run, defaults)
+    if not changed:
+        return ""
+    return (f"Non-default parameters: {', '.join(changed)}. The verdicts below are this run's; "
+            "the book's ledger is judged on a default run.\n\n")
+
+
+def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
+    """A chapter's claims section: its ledger rows judged on the run in ``out_dir``.
+
+    Called by the chapter notebook after it wrote ``metrics.json``; the intro's ledger renders
+    the same rows with the same :func:`chapter_table`.
+    """
+    from railpaper.pipeline.outputs import claims
+    rows, run = run_rows(chapter, out_dir)
+    table = claims(chapter)
+    rules = ["", "How each verdict is decided (the rule, fixed from the paper's wording, and why):",
+             ""]
+    for r in rows:
+        row = table[r.key]
+        what = row.get("rule") or row.get("otherwise", {}).get("reason", "")
+        reading = f" — reading: {r.reading}" if r.reading else ""
+        why = f" *Why:* {row['justification']}" if row.get("justification") else ""
+        selects = (f" (selected by `{row['reading_parameter']}`)"
+                   if row.get("reading_parameter") else "")
+        rules.append(f"- **{r.claim}**{reading}{selects}: {what}{why}".replace("\n", " "))
+    return (non_default_note(chapter, run) + f"{len(rows)} claims: {summary(rows)}.\n\n"
+            + chapter_table(rows) + "\n".join(rules) + "\n")
+
+
 def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None) -> str:
-    """MyST tables of the ledger, one per chapter; every reason links to the chapter's claims."""
+    """The intro's ledger: one table per chapter, each headed by a link to the chapter's claims."""
     titles = titles or {}
-    lines = [f"{len(rows)} claims: {_summary(rows)}."]
+    lines = [f"{len(rows)} claims and readings: {summary(rows)}.", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"
-        lines += ["", f"**{link}** — {_summary(mine)}", "",
-                  "| paper claim | paper | ours | verdict | why |", "|---|---|---|---|---|"]
-        for r in mine:
-            lines.append(f"| {_cell(r.claim)} ({_cell(r.source)}) | {_cell(r.paper)} | "
-                         f"{_cell(r.ours)} | **{r.verdict}** | {_cell(r.reason)} "
-                         f"({{ref}}`chapter <{claims_label(chapter)}>`) |")
-    return "\n".join(lines) + "\n"
+        lines += [f"**{link}** — {summary(mine)}", "", chapter_table(mine)]
+    return "\n".join(lines)
 
 
 def ledger_counts(rows: list[LedgerRow]) -> dict[str, dict[str, int]]:
@@ -260,24 +266,28 @@ def ledger_counts(rows: list[LedgerRow]) -> dict[str, dict[str, int]]:
     return out
 
 
-def write_ledger(book_dir: str | Path, chapters: list[str]) -> Path:
-    """Write ``book_dir/_generated/claims_ledger.md`` from the runs in ``book_dir/chapters``."""
-    rows = build_ledger(chapters, Path(book_dir) / "chapters")
-    titles = {c: chapter_spec(c).title for c in chapters}
-    path = Path(book_dir) / "_generated" / "claims_ledger.md"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(ledger_markdown(rows, titles))
+def write_ledger_csv(rows: list[LedgerRow], path: str | Path) -> Path:
+    """``claims_ledger.csv``: one row per claim and reading (columns :data:`CSV_COLUMNS`)."""
+    path = Path(path)
+    with path.open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(CSV_COLUMNS)
+        for r in rows:
+            writer.writerow([r.chapter, r.claim, r.reading or "as stated",
+                             "" if r.paper_value is None else r.paper_value,
+                             *("" if v is None else repr(v) if isinstance(v, float) else v
+                               for v in (r.ours_value, r.ours_low, r.ours_high, r.n_samples)),
+                             r.verdict, r.reason])
     return path
 
 
-def run_ledger(chapter: str, out_dir: str | Path) -> pd.DataFrame:
-    """The ledger rows of one run in ``out_dir`` (its metrics.json and timings.json).
-
-    A chapter notebook shows this as its claims verdicts, so that the chapter and the book's
-    ledger cannot disagree.
-    """
-    from railpaper.pipeline.outputs import claims
-    out = Path(out_dir)
-    rows = chapter_rows(chapter, claims(chapter), _read_json(out / "metrics.json"),
-                        _read_json(out / "timings.json"))
-    return ledger_frame(rows)[["claim", "paper", "ours", "verdict", "reason"]]
+def write_ledger(book_dir: str | Path, chapters: list[str],
+                 titles: Callable[[str], str] | None = None) -> Path:
+    """Write ``_generated/claims_ledger.md`` and ``claims_ledger.csv`` from ``book_dir/chapters``."""
+    rows = build_ledger(chapters, Path(book_dir) / "chapters")
+    title = titles or (lambda c: chapter_spec(c).title)
+    path = Path(book_dir) / "_generated" / "claims_ledger.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(ledger_markdown(rows, {c: title(c) for c in chapters}))
+    write_ledger_csv(rows, path.with_suffix(".csv"))
+    return path

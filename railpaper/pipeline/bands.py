@@ -1,0 +1,158 @@
+"""CI tolerance bands from disjoint seed batches (``railpaper bands``).
+
+A chapter's default run decides its claims on Monte Carlo samples with seeds ``seed, seed+1, …``.
+Batch k re-runs the whole chapter notebook (papermill, so the metrics are exactly the ones a
+default run writes) with ``seed = k · stride``; with fewer than ``stride`` samples per run the
+batches share no seed.  The band of a metric is the observed [min, max] over the batches, widened
+by ``widen`` × the range on each side (a point band when every batch agrees), and the widening
+never crosses a threshold of a claim rule that reads the metric: it stops halfway between the
+observed extreme and the threshold.  If the observed range itself straddles a threshold, the
+band says so in its ``source`` and ``tests/test_claims_bands.py`` will fail: the verdict is not
+stable at this sample size, which is a finding, not something to tune away.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from railpaper.data import read_toml
+from railpaper.pipeline.chapters import chapter_spec, run_chapter
+from railpaper.pipeline.claim_rules import rule_metrics
+from railpaper.pipeline.outputs import chapter_data_dir, claims
+
+DEFAULT_STRIDE = 1000
+
+
+def rule_thresholds(chapter: str) -> dict[str, list[float]]:
+    """``{metric: [thresholds]}``: the constants a claim rule compares each metric with."""
+    out: dict[str, list[float]] = {}
+    for row in claims(chapter).values():
+        for case in row.get("cases", []):
+            for cond in case.get("when", []):
+                ts = [cond[k] for k in ("min", "max", "above", "below") if k in cond]
+                ref = None if "reference" in cond else cond.get("value", row.get("paper_value"))
+                if isinstance(ref, (int, float)) and not isinstance(ref, bool):
+                    if cond["test"] == "within_abs":
+                        ts += [ref - cond["tolerance"], ref + cond["tolerance"]]
+                    elif cond["test"] == "within_factor":
+                        ts += [ref / cond["factor"], ref * cond["factor"]]
+                    elif cond["test"] == "equals":
+                        ts.append(ref)
+                for metric in cond.get("metrics", []):
+                    out.setdefault(metric, []).extend(float(t) for t in ts)
+    return out
+
+
+def band(values: list[float], thresholds: list[float], widen: float = 0.25
+         ) -> tuple[float, float, str]:
+    """(low, high, note) for one metric's batch values (see the module docstring)."""
+    lo, hi = min(values), max(values)
+    pad = widen * (hi - lo)
+    low, high, notes = lo - pad, hi + pad, []
+    for t in thresholds:
+        if lo <= t <= hi and lo != hi:
+            notes.append(f"observed range straddles the rule threshold {t:g}")
+        elif t < lo and low <= t:
+            low = (lo + t) / 2
+            notes.append(f"widening capped halfway to the threshold {t:g}")
+        elif t > hi and high >= t:
+            high = (hi + t) / 2
+            notes.append(f"widening capped halfway to the threshold {t:g}")
+    return low, high, "; ".join(dict.fromkeys(notes))
+
+
+def _batch_metrics(chapter: str, quick: bool, seed: int, work: Path) -> dict:
+    out = work / f"seed-{seed}"
+    path = out / "metrics.json"
+    params = chapter_spec(chapter).resolve({"seed": seed}, quick)
+    if path.exists():
+        run = json.loads(path.read_text())
+        if run.get("parameters") == params:                # a finished batch: resume
+            return _values(out)
+    run_chapter(chapter, {"seed": seed}, quick, out, progress=False)
+    return _values(out)
+
+
+def _values(out: Path) -> dict:
+    values = {}
+    timings = out / "timings.json"
+    if timings.exists():
+        values.update(json.loads(timings.read_text()).get("metrics", {}))
+    values.update(json.loads((out / "metrics.json").read_text())["metrics"])
+    return values
+
+
+def compute_bands(chapter: str, quick: bool, batches: int = 10, stride: int = DEFAULT_STRIDE,
+                  work_dir: str | Path | None = None, metrics: list[str] | None = None,
+                  widen: float = 0.25) -> dict[str, tuple[float, float, str]]:
+    """Bands of ``metrics`` (default: every metric a claim rule reads, and every metric already
+    banded for this mode) from ``batches`` chapter runs with seeds 0, stride, 2·stride, …"""
+    if batches < 2:
+        raise ValueError(f"bands need at least 2 batches, got {batches}")
+    mode = "quick" if quick else "full"
+    work = Path(work_dir or f"runs/bands-{chapter}-{mode}")
+    if metrics is None:
+        tolerances = read_toml(chapter_data_dir(chapter) / "tolerances.toml").get(mode, {})
+        metrics = list(tolerances)
+        for row in claims(chapter).values():
+            metrics += rule_metrics(row)
+        metrics = list(dict.fromkeys(metrics))
+    seeds = [k * stride for k in range(batches)]
+    runs = []
+    for i, seed in enumerate(seeds):
+        print(f"railpaper: bands of {chapter} ({mode}): batch {i + 1}/{batches}, seed {seed}",
+              file=sys.stderr, flush=True)
+        runs.append(_batch_metrics(chapter, quick, seed, work))
+    thresholds = rule_thresholds(chapter)
+    out = {}
+    seed_text = f"{batches} disjoint seed batches (seed = {seeds[0]}, {seeds[1]}, …, {seeds[-1]})"
+    for metric in metrics:
+        values = [r[metric] for r in runs if metric in r]
+        if len(values) < len(runs):
+            print(f"railpaper: {metric}: missing in {len(runs) - len(values)} batches; no band",
+                  file=sys.stderr)
+            continue
+        values = [float(v) for v in values]
+        low, high, note = band(values, thresholds.get(metric, []), widen)
+        source = (f"{seed_text}: observed {min(values):.6g} to {max(values):.6g}, widened "
+                  f"{widen:.0%} of the range" + (f"; {note}" if note else ""))
+        out[metric] = (low, high, source)
+    return out
+
+
+def _number(x: float) -> str:
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return repr(float(x)) if not float(x).is_integer() else repr(int(x)) if abs(x) < 1e15 \
+        else repr(float(x))
+
+
+def write_bands(chapter: str, quick: bool, bands: dict[str, tuple[float, float, str]],
+                path: str | Path | None = None) -> Path:
+    """Write bands as a tolerances file: this mode replaced, the other mode and meta kept.
+
+    ``path`` defaults to the chapter's ``data/<chapter>/tolerances.toml``.
+    """
+    target = Path(path) if path else chapter_data_dir(chapter) / "tolerances.toml"
+    existing = read_toml(target) if target.exists() else \
+        read_toml(chapter_data_dir(chapter) / "tolerances.toml")
+    mode = "quick" if quick else "full"
+    doc = {"full": existing.get("full", {}), "quick": existing.get("quick", {})}
+    doc[mode] = {m: {"min": lo, "max": hi, "source": src} for m, (lo, hi, src) in bands.items()}
+    lines = [f"# CI tolerance bands of chapter {chapter} for its default parameters; generated by",
+             "# `railpaper bands` from disjoint seed batches (see railpaper/pipeline/bands.py);",
+             "# each band's source says how it was set.",
+             "[meta]", 'parameters = "defaults"', ""]
+    for m in ("full", "quick"):
+        for metric, entry in doc[m].items():
+            lines.append(f"[{m}.{metric}]")
+            for key in ("min", "max"):
+                if key in entry:
+                    lines.append(f"{key} = {_number(entry[key])}")
+            lines.append(f"source = {json.dumps(entry['source'], ensure_ascii=False)}")
+            lines.append("")
+    target.write_text("\n".join(lines))
+    return target

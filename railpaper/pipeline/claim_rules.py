@@ -1,0 +1,216 @@
+"""The verdict rules of ``data/<chapter>/claims.toml``: schema, evaluation on a run, and
+evaluation over tolerance bands (is the verdict the same for every run that passes CI?).
+
+One table of a claims file is one ledger row: one claim of a paper under one reading::
+
+    [convergence_slower_with_speed]
+    claim = "convergence takes longer as speed rises"     # the paper's wording
+    source = "paper 001, abstract; section 3 (2); Figs 4-5"
+    group = "..."             # optional: rows that are readings of one claim share it (default: key)
+    reading = "..."           # optional: the reading's name; the default reading's row comes first
+    reading_parameter = "..." # optional: the chapter parameter value that selects the reading
+    rule = "..."              # the rule in words, fixed from the paper's wording
+    justification = "..."     # why this statistic and threshold
+    paper_value = 55          # optional, with unit = "..."
+    primary = "metric"        # the statistic the verdict is decided on ("ours")
+    statistic = "median over records of ..."   # what primary is, in words
+    interval = ["metric_low", "metric_high"]   # its 95 % interval
+    n_samples = "metric_n"    # Monte Carlo samples behind it ... or: deterministic = true
+    [[convergence_slower_with_speed.cases]]    # tried in order; the first whose conditions hold
+    verdict = "reproduced"    # reproduced | artefact | differs | not testable
+    reason = "... {metric:.3g} ..."            # str.format over the run's metrics
+    when = [{test = "range", metrics = ["metric_low"], above = 0}]
+    [convergence_slower_with_speed.otherwise]  # no case holds (verdict "differs" unless stated)
+    reason = "..."
+
+A row that cannot be tested has only ``[key.otherwise] verdict = "not testable"`` and a reason.
+
+Condition tests (every metric of ``metrics`` must pass; the reference is ``reference`` (a metric),
+else ``value``, else the row's ``paper_value``): ``within_abs`` (|m − ref| ≤ tolerance),
+``within_factor`` (m > 0 and ref/factor ≤ m ≤ ref·factor), ``range`` (min ≤ m ≤ max and
+above < m < below), ``equals`` (m == ref), ``increasing`` (the metrics in order strictly increase;
+``strict = false``: never decrease).
+"""
+
+from __future__ import annotations
+
+import math
+
+from railpaper.data import DataError
+
+#: Verdicts a rule can give, in the order the ledger counts them.
+RULE_VERDICTS = ("reproduced", "artefact", "differs", "not testable")
+TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
+ROW_KEYS = {"claim", "source", "group", "reading", "reading_parameter", "rule", "justification",
+            "paper_value", "unit", "primary", "primary_unit", "statistic", "interval",
+            "n_samples", "deterministic", "metrics", "cases", "otherwise"}
+
+
+def is_untestable(row: dict) -> bool:
+    """A row whose only outcome is ``not testable`` (no metric is read)."""
+    return not row.get("cases") and row.get("otherwise", {}).get("verdict") == "not testable"
+
+
+def check_row(key: str, row: dict, where: str) -> None:
+    """Raise :class:`DataError` (one line) for a row without a usable, documented rule."""
+    def fail(message: str):
+        raise DataError(f"{where}: claim '{key}': {message}")
+
+    unknown = set(row) - ROW_KEYS
+    if unknown:
+        fail(f"unknown key '{sorted(unknown)[0]}'")
+    for needed in ("claim", "source"):
+        if not row.get(needed):
+            fail(f"needs '{needed}'")
+    otherwise = row.get("otherwise", {})
+    if otherwise.get("verdict", "differs") not in RULE_VERDICTS or (
+            otherwise and "reason" not in otherwise):
+        fail(f"'otherwise' needs a reason and a verdict in {', '.join(RULE_VERDICTS)}")
+    if is_untestable(row):
+        return
+    if not row.get("rule"):
+        fail("needs 'rule' (the rule in words, fixed from the paper's wording)")
+    if "primary" not in row or not row.get("cases"):
+        fail("needs 'primary' and at least one [[cases]] (or only otherwise = not testable)")
+    if not row.get("deterministic") and "n_samples" not in row:
+        fail("needs 'n_samples' (the metric counting its Monte Carlo samples) or "
+             "'deterministic = true'")
+    interval = row.get("interval")
+    if interval is not None and (not isinstance(interval, list) or len(interval) != 2):
+        fail("'interval' must be [low_metric, high_metric]")
+    for case in row["cases"]:
+        if case.get("verdict") not in RULE_VERDICTS or "reason" not in case:
+            fail(f"each case needs a reason and a verdict in {', '.join(RULE_VERDICTS)}")
+        for cond in case.get("when", []):
+            if cond.get("test") not in TESTS:
+                fail(f"unknown test {cond.get('test')!r} (expected one of {', '.join(TESTS)})")
+            if not cond.get("metrics"):
+                fail("a condition needs 'metrics'")
+
+
+def rule_metrics(row: dict) -> list[str]:
+    """Every metric a row's verdict and its "ours" read: primary, interval, n_samples, conditions."""
+    names = [row["primary"]] if "primary" in row else []
+    names += list(row.get("interval", []))
+    if "n_samples" in row:
+        names.append(row["n_samples"])
+    names += condition_metrics(row)
+    return list(dict.fromkeys(names))
+
+
+def condition_metrics(row: dict) -> list[str]:
+    """The metrics the verdict's conditions read (the ones whose bands must decide it)."""
+    names = []
+    for case in row.get("cases", []):
+        for cond in case.get("when", []):
+            names += list(cond.get("metrics", []))
+            if "reference" in cond:
+                names.append(cond["reference"])
+    return list(dict.fromkeys(names))
+
+
+def _reference(cond: dict, row: dict, values: dict):
+    if "reference" in cond:
+        return values[cond["reference"]]
+    return cond.get("value", row.get("paper_value"))
+
+
+def holds(cond: dict, row: dict, values: dict) -> bool:
+    """Whether one condition holds on a run's metric values."""
+    xs = [values[name] for name in cond["metrics"]]
+    test = cond["test"]
+    if test == "increasing":
+        pairs = list(zip(xs, xs[1:]))
+        return all(b > a if cond.get("strict", True) else b >= a for a, b in pairs)
+    if test == "range":
+        return all(cond.get("min", -math.inf) <= x <= cond.get("max", math.inf)
+                   and cond.get("above", -math.inf) < x < cond.get("below", math.inf) for x in xs)
+    ref = _reference(cond, row, values)
+    if test == "equals":
+        return all(x == ref for x in xs)
+    if test == "within_abs":
+        return all(abs(x - ref) <= cond["tolerance"] for x in xs)
+    factor = cond["factor"]
+    return all(x > 0 and ref / factor <= x <= ref * factor for x in xs)
+
+
+def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
+    """(verdict, reason template) of the first case that holds, else the row's ``otherwise``."""
+    for case in row.get("cases", []):
+        if all(holds(cond, row, values) for cond in case.get("when", [])):
+            return case["verdict"], case["reason"]
+    fallback = row.get("otherwise", {})
+    return fallback.get("verdict", "differs"), fallback.get("reason", "")
+
+
+# ---- over tolerance bands: three-valued logic (True, False, None = depends on where in the band)
+
+def _tri_all(values) -> bool | None:
+    values = list(values)
+    if any(v is False for v in values):
+        return False
+    return True if all(v is True for v in values) else None
+
+
+def _range_box(lo: float, hi: float, cond: dict) -> bool | None:
+    mn, mx = cond.get("min", -math.inf), cond.get("max", math.inf)
+    above, below = cond.get("above", -math.inf), cond.get("below", math.inf)
+    if mn <= lo and hi <= mx and above < lo and hi < below:
+        return True
+    if hi < mn or lo > mx or hi <= above or lo >= below:
+        return False
+    return None
+
+
+def holds_over_bands(cond: dict, row: dict, bands: dict[str, tuple[float, float]]) -> bool | None:
+    """Whether a condition holds for every (True), no (False) or some (None) point of the bands.
+
+    ``bands[metric] = (low, high)``: every value a run passing ``railpaper check`` can have.
+    """
+    boxes = [bands[name] for name in cond["metrics"]]
+    test = cond["test"]
+    if test == "increasing":
+        strict = cond.get("strict", True)
+        out = []
+        for (alo, ahi), (blo, bhi) in zip(boxes, boxes[1:]):
+            if (ahi < blo) if strict else (ahi <= blo):
+                out.append(True)
+            elif (bhi <= alo) if strict else (bhi < alo):
+                out.append(False)
+            else:
+                out.append(None)
+        return _tri_all(out)
+    if test == "range":
+        return _tri_all(_range_box(lo, hi, cond) for lo, hi in boxes)
+    rlo, rhi = bands[cond["reference"]] if "reference" in cond else (
+        (_reference(cond, row, {}),) * 2)
+    out = []
+    for lo, hi in boxes:
+        if test == "equals":
+            out.append(True if lo == hi == rlo == rhi else False if (hi < rlo or lo > rhi) else None)
+        elif test == "within_abs":
+            dlo, dhi, tol = lo - rhi, hi - rlo, cond["tolerance"]
+            out.append(True if max(abs(dlo), abs(dhi)) <= tol else
+                       False if (dlo > tol or dhi < -tol) else None)
+        else:                                                   # within_factor, ref > 0
+            f = cond["factor"]
+            out.append(True if (lo > 0 and rhi / f <= lo and hi <= rlo * f) else
+                       False if (hi <= 0 or hi < rlo / f or lo > rhi * f) else None)
+    return _tri_all(out)
+
+
+def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set[str]:
+    """Every verdict a run whose condition metrics lie anywhere in ``bands`` can get.
+
+    One element: the bands decide the verdict, so a change that flips it fails the check.
+    """
+    possible = set()
+    for case in row.get("cases", []):
+        state = _tri_all(holds_over_bands(c, row, bands) for c in case.get("when", []))
+        if state is False:
+            continue
+        possible.add(case["verdict"])
+        if state is True:
+            return possible
+    possible.add(row.get("otherwise", {}).get("verdict", "differs"))
+    return possible

@@ -1,0 +1,60 @@
+"""railpaper bands: batch seeds, widening capped at rule thresholds, the tolerances file."""
+
+import json
+
+import pytest
+
+from railpaper.data import read_toml
+from railpaper.pipeline import bands as bands_module
+from railpaper.pipeline.bands import band, compute_bands, write_bands
+from railpaper.pipeline.check import load_tolerances
+
+
+def test_band_widens_by_a_quarter_of_the_range():
+    low, high, note = band([1.0, 3.0, 2.0], [])
+    assert (low, high, note) == (0.5, 3.5, "")
+
+
+def test_band_stops_halfway_to_a_threshold_on_either_side():
+    low, high, note = band([1.0, 3.0], [3.2, 0.9])
+    assert high == pytest.approx(3.1) and low == pytest.approx(0.95)
+    assert "capped halfway to the threshold 3.2" in note
+
+
+def test_band_reports_a_straddled_threshold_and_keeps_point_bands():
+    assert "straddles the rule threshold 2" in band([1.0, 3.0], [2.0])[2]
+    assert band([20, 20, 20], [5.0])[:2] == (20, 20)
+
+
+def test_compute_bands_runs_disjoint_batches_and_resumes(monkeypatch, tmp_path):
+    chapter = "reduced-order-observer"
+    calls = []
+
+    def fake_run(name, overrides, quick, out, progress):
+        calls.append(overrides["seed"])
+        out.mkdir(parents=True)
+        from railpaper.pipeline.chapters import chapter_spec
+        params = chapter_spec(name).resolve(overrides, quick)
+        metrics = {"x": float(overrides["seed"]) / 1000, "n": 20}
+        (out / "metrics.json").write_text(json.dumps({"parameters": params, "metrics": metrics}))
+
+    monkeypatch.setattr(bands_module, "run_chapter", fake_run)
+    out = compute_bands(chapter, True, batches=4, work_dir=tmp_path, metrics=["x", "n"])
+    assert calls == [0, 1000, 2000, 3000]
+    assert out["x"][:2] == (-0.75, 3.75) and out["n"][:2] == (20, 20)
+    assert "4 disjoint seed batches" in out["x"][2]
+    compute_bands(chapter, True, batches=4, work_dir=tmp_path, metrics=["x"])
+    assert len(calls) == 4                                   # finished batches reused
+
+
+def test_write_bands_replaces_one_mode_and_loads(tmp_path, monkeypatch):
+    chapter = "reduced-order-observer"
+    path = tmp_path / "tolerances.toml"
+    path.write_text('[meta]\nparameters = "defaults"\n[full.a]\nmin = 1\nsource = "kept"\n'
+                    '[quick.old]\nmax = 2\nsource = "replaced"\n')
+    write_bands(chapter, True, {"b": (0.5, float("inf"), 'say "why"')}, path)
+    doc = read_toml(path)
+    assert doc["full"] == {"a": {"min": 1, "source": "kept"}}
+    assert doc["quick"] == {"b": {"min": 0.5, "max": float("inf"), "source": 'say "why"'}}
+    monkeypatch.setattr("railpaper.pipeline.check.chapter_data_dir", lambda c: tmp_path)
+    assert load_tolerances(chapter)["quick"]["b"][:2] == (0.5, float("inf"))

@@ -1,0 +1,58 @@
+"""Bands that can fail: every claim rule's metrics have CI bands in data/<chapter>/tolerances.toml
+that decide its verdict, so a change that flips a verdict fails ``railpaper check``; and no
+verdict rests on fewer Monte Carlo samples than the chapter promises (>= 20 full, >= 5 quick)."""
+
+import pytest
+
+from railpaper.data import read_toml
+from railpaper.pipeline.chapters import book_chapters
+from railpaper.pipeline.check import load_tolerances
+from railpaper.pipeline.claim_rules import (is_untestable, rule_metrics, verdicts_over_bands)
+from railpaper.pipeline.outputs import chapter_data_dir
+
+MIN_SAMPLES = {"full": 20, "quick": 5}
+
+
+def _rows(chapter):
+    return read_toml(chapter_data_dir(chapter) / "claims.toml")
+
+
+@pytest.mark.parametrize("mode", ["full", "quick"])
+@pytest.mark.parametrize("chapter", book_chapters())
+def test_bands_decide_every_verdict(chapter, mode):
+    bands = {m: (lo, hi) for m, (lo, hi, _) in load_tolerances(chapter)[mode].items()}
+    problems = []
+    for key, row in _rows(chapter).items():
+        if is_untestable(row):
+            continue
+        unbanded = [m for m in rule_metrics(row) if m not in bands]
+        if unbanded:
+            problems.append(f"{key}: no {mode} band for {', '.join(unbanded)}")
+            continue
+        verdicts = verdicts_over_bands(row, bands)
+        if len(verdicts) != 1:
+            problems.append(f"{key}: {mode} bands allow {sorted(verdicts)}")
+        if "n_samples" in row and bands[row["n_samples"]][0] < MIN_SAMPLES[mode]:
+            problems.append(f"{key}: {mode} band of {row['n_samples']} admits fewer than "
+                            f"{MIN_SAMPLES[mode]} samples")
+    assert not problems, "\n".join(problems)
+
+
+def test_three_valued_band_logic_on_hand_cases():
+    row = {"paper_value": 350, "cases": [
+        {"verdict": "reproduced", "when": [{"test": "range", "metrics": ["s"], "max": 350}]},
+        {"verdict": "artefact", "when": [{"test": "within_abs", "metrics": ["t"], "tolerance": 10}]}],
+        "otherwise": {"verdict": "differs"}}
+    assert verdicts_over_bands(row, {"s": (100, 350), "t": (0, 1)}) == {"reproduced"}
+    assert verdicts_over_bands(row, {"s": (100, 351), "t": (0, 1)}) == {"reproduced", "differs"}
+    assert verdicts_over_bands(row, {"s": (351, 400), "t": (345, 355)}) == {"artefact"}
+    assert verdicts_over_bands(row, {"s": (351, 400), "t": (339, 355)}) == {"artefact", "differs"}
+    trend = {"cases": [{"verdict": "reproduced",
+                        "when": [{"test": "increasing", "metrics": ["a", "b"]}]}]}
+    assert verdicts_over_bands(trend, {"a": (0, 1), "b": (1.5, 2)}) == {"reproduced"}
+    assert verdicts_over_bands(trend, {"a": (0, 1), "b": (0.5, 2)}) == {"reproduced", "differs"}
+    ref = {"cases": [{"verdict": "reproduced", "when": [
+        {"test": "within_abs", "metrics": ["a"], "reference": "b", "tolerance": 1}]}]}
+    assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (0.2, 0.9)}) == {"reproduced"}
+    assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (1.2, 3)}) == {"reproduced", "differs"}
+    assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (1.6, 3)}) == {"differs"}
