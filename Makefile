@@ -5,7 +5,7 @@ SHELL := /bin/bash
 PYTHON ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
-MATHJAX := book/_static/mathjax/node_modules/mathjax/es5/tex-chtml.js
+MATHJAX := book/_mathjax/node_modules/mathjax/es5/tex-chtml.js
 
 .PHONY: book book-quick test venv chromium lock clean
 
@@ -17,9 +17,10 @@ $(BIN)/railpaper: environment.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(BIN)/railpaper
 
-# MathJax 3 for the offline book, pinned by book/_static/mathjax/package-lock.json.
-$(MATHJAX): book/_static/mathjax/package.json book/_static/mathjax/package-lock.json
-	cd book/_static/mathjax && npm ci --silent --no-audit --no-fund
+# MathJax 3 for the offline book, pinned by book/_mathjax/package-lock.json. It lives outside
+# _static: Jupyter Book 1 adds every .js file under _static to every page as a <script>.
+$(MATHJAX): book/_mathjax/package.json book/_mathjax/package-lock.json
+	cd book/_mathjax && npm ci --silent --no-audit --no-fund
 	touch $(MATHJAX)
 
 book: venv

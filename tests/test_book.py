@@ -22,13 +22,25 @@ def built_book(tmp_path_factory):
     return build_book(quick=True, book_dir=book, progress=False)
 
 
-def rendered_dom(page: Path, profile: Path) -> str:
+def rendered_dom(page: Path, profile: Path) -> tuple[str, list[str]]:
+    """The DOM after scripts ran, and the page's uncaught errors / failed loads from the console."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    assert chromium, "Debian chromium is required for the rendering test (.ci/run installs it)"
+    assert chromium, "Debian chromium is required for the rendering test (`make test` installs it)"
     result = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                             "--enable-logging=stderr", "--v=0",
                              "--virtual-time-budget=20000", "--dump-dom", page.as_uri()],
                             capture_output=True, text=True, timeout=120)
-    return result.stdout
+    errors = [line.split("] ", 1)[-1] for line in result.stderr.splitlines()
+              if ":CONSOLE" in line and ("Uncaught" in line or "Failed to load" in line)]
+    return result.stdout, errors
+
+
+def ledger_rows(html: str) -> list[str]:
+    """Text of the table rows that carry a verdict badge, in page order."""
+    rows = re.findall(r"<tr[^>]*>(.*?)</tr>", html, re.S)
+    text = [re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", row)).strip() for row in rows
+            if 'class="verdict verdict-' in row]
+    return text
 
 
 @pytest.mark.parametrize("chapter", book_chapters())
@@ -36,7 +48,8 @@ def test_chapter_page_has_figures_and_typeset_math(built_book, chapter, tmp_path
     stem = Path(load_chapter(chapter).SPEC.notebook).stem
     page = built_book / "chapters" / chapter / f"{stem}.html"
     assert page.exists()
-    dom = rendered_dom(page, tmp_path / "profile")
+    dom, errors = rendered_dom(page, tmp_path / "profile")
+    assert not errors, f"uncaught errors in {page.name}: {errors}"
     # MathJax 3 (served from _static, no network) replaced the TeX by mjx-container elements
     assert dom.count("<mjx-container") >= 3, "math was not typeset"
     assert "math display" not in dom or "<mjx-container" in dom
@@ -46,7 +59,39 @@ def test_chapter_page_has_figures_and_typeset_math(built_book, chapter, tmp_path
         assert (page.parent / src).resolve().exists(), f"figure {src} missing from the build"
 
 
-def test_mathjax_served_locally(built_book):
-    html = (built_book / "intro.html").read_text()
-    assert "cdn.jsdelivr" not in html and "mathjax/node_modules/mathjax/es5/tex-chtml.js" in html
-    assert (built_book / "_static/mathjax/node_modules/mathjax/es5/tex-chtml.js").exists()
+def test_mathjax_served_locally_as_one_script(built_book):
+    assert (built_book / "mathjax/es5/tex-chtml.js").exists()
+    for page in built_book.rglob("*.html"):
+        html = page.read_text()
+        scripts = re.findall(r'<script[^>]*src="([^"]*)"', html)
+        assert "cdn.jsdelivr" not in html and not any("node_modules" in s for s in scripts), page
+        assert sum("mathjax" in s for s in scripts) <= 1, f"{page}: MathJax loaded twice"
+
+
+def test_intro_page_renders_without_errors(built_book, tmp_path):
+    dom, errors = rendered_dom(built_book / "intro.html", tmp_path / "profile")
+    assert not errors, f"uncaught errors in intro.html: {errors}"
+    assert dom.count("<mjx-container") >= 1
+
+
+def test_chapter_claims_equal_the_intro_ledger(built_book):
+    """Each chapter's claims section shows exactly its rows of the intro's ledger."""
+    intro = ledger_rows((built_book / "intro.html").read_text())
+    chapters = []
+    for chapter in book_chapters():
+        stem = Path(load_chapter(chapter).SPEC.notebook).stem
+        rows = ledger_rows((built_book / "chapters" / chapter / f"{stem}.html").read_text())
+        assert rows, f"{chapter}: no ledger rows on the chapter page"
+        chapters += rows
+    assert chapters == intro
+
+
+def test_ledger_csv_written(built_book):
+    import csv
+
+    from railpaper.pipeline.ledger import CSV_COLUMNS
+    path = built_book.parent.parent / "_generated" / "claims_ledger.csv"
+    with path.open() as handle:
+        table = list(csv.DictReader(handle))
+    assert table and list(table[0]) == CSV_COLUMNS
+    assert not any("{" in row["reason"] for row in table), "a reason template did not format"

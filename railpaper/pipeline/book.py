@@ -14,7 +14,7 @@ from railpaper.pipeline.chapters import (BOOK_DIR, REPO_DIR, PipelineError, book
 from railpaper.pipeline.bench import write_performance
 from railpaper.pipeline.ledger import write_ledger
 
-MATHJAX_SCRIPT = Path("_static/mathjax/node_modules/mathjax/es5/tex-chtml.js")
+MATHJAX_SCRIPT = Path("_mathjax/node_modules/mathjax/es5/tex-chtml.js")
 APPENDIX_PAGES = ("reproducibility", "performance")
 KEY_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "control", "filterpy", "numba", "dask",
                 "distributed", "matplotlib", "pandas", "papermill", "jupyter-book")
