@@ -182,6 +182,7 @@ def machine() -> dict:
 
 def main_payload(quick: bool, progress=print) -> dict:
     """Run the whole benchmark; returns the JSON payload (see railpaper.pipeline.bench)."""
+    load_before = os.getloadavg()
     sizes = dict(working=200 if quick else 1000, paper=40 if quick else 200,
                  fp_working=30 if quick else 150, fp_paper=6 if quick else 25)
     steady = dict(skip=1000 if quick else 2000, steps=200 if quick else 1000)
@@ -242,7 +243,8 @@ def main_payload(quick: bool, progress=print) -> dict:
         speedup_vs_numpy_lateral_N1000=baselines[("rbpf-working", "numpy")],
         speedup_vs_numpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "numpy")],
         **ratios, profile_N1000_ms=prof, memory_N10000=mem, quick=quick, sizes=sizes,
-        machine=machine(), rows=rows)
+        machine=dict(machine(), load_before=list(load_before), load_after=list(os.getloadavg())),
+        rows=rows)
 
 
 if __name__ == "__main__":
