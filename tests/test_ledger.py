@@ -225,16 +225,20 @@ def test_repository_claims_all_have_rules(chapter):
         assert row.get("justification") or row.get("otherwise", {}).get("verdict") == "not testable"
 
 
-def test_toc_lists_appendix_pages_that_exist(tmp_path):
+def test_toc_numbers_chapters_and_lists_appendix_pages_that_exist(tmp_path):
+    import yaml
+
     from railpaper.pipeline.book import write_toc
     (tmp_path / "reproducibility.md").write_text("# R\n")
     chapters = book_chapters()
-    toc = write_toc(tmp_path, chapters).read_text().splitlines()
-    assert toc[-1] == "- file: reproducibility" and "- file: performance" not in toc
+    toc = yaml.safe_load(write_toc(tmp_path, chapters).read_text())
+    main, appendix = toc["parts"]
+    assert main["numbered"] is True and "numbered" not in appendix
+    assert [c["file"].split("/")[1] for c in main["chapters"]] == chapters
+    assert appendix["chapters"] == [{"file": "reproducibility"}]
     (tmp_path / "performance.md").write_text("# P\n")
-    toc = write_toc(tmp_path, chapters).read_text().splitlines()
-    assert toc[-2:] == ["- file: reproducibility", "- file: performance"]
-    assert len(toc) == 3 + len(chapters) + 2
+    toc = yaml.safe_load(write_toc(tmp_path, chapters).read_text())
+    assert toc["parts"][1]["chapters"] == [{"file": "reproducibility"}, {"file": "performance"}]
 
 
 def test_environment_table_matches_the_installed_packages(tmp_path):

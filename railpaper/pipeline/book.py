@@ -15,20 +15,23 @@ from railpaper.pipeline.bench import write_performance
 from railpaper.pipeline.ledger import write_ledger
 
 MATHJAX_SCRIPT = Path("_mathjax/node_modules/mathjax/es5/tex-chtml.js")
-APPENDIX_PAGES = ("reproducibility", "performance")
+APPENDIX_PAGES = ("reproducibility", "performance", "references")
 KEY_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "control", "filterpy", "numba", "dask",
                 "distributed", "matplotlib", "pandas", "papermill", "jupyter-book")
 
 
 def write_toc(book_dir: Path, chapters: list[str]) -> Path:
-    """Write ``_toc.yml``: introduction, the chapters in book order, the appendix pages."""
-    lines = ["format: jb-book", "root: intro", "chapters:"]
+    """Write ``_toc.yml``: introduction, the chapters numbered in book order, then the appendix
+    pages that exist (unnumbered)."""
+    lines = ["format: jb-book", "root: intro", "parts:", "- caption: Chapters", "  numbered: true",
+             "  chapters:"]
     for name in chapters:
         stem = Path(chapter_spec(name).notebook).stem
-        lines.append(f"- file: chapters/{name}/{stem}")
-    for page in APPENDIX_PAGES:
-        if (book_dir / f"{page}.md").exists():
-            lines.append(f"- file: {page}")
+        lines.append(f"  - file: chapters/{name}/{stem}")
+    appendix = [page for page in APPENDIX_PAGES if (book_dir / f"{page}.md").exists()]
+    if appendix:
+        lines += ["- caption: Appendix", "  chapters:"]
+        lines += [f"  - file: {page}" for page in appendix]
     path = book_dir / "_toc.yml"
     path.write_text("\n".join(lines) + "\n")
     return path
