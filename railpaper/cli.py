@@ -1,4 +1,4 @@
-"""The ``railpaper`` command: list, run, check, sweep, bands, build, track, bench.
+"""The ``railpaper`` command: list, run, check, compare, sweep, bands, build, track, bench.
 
 Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
 no traceback.
@@ -92,6 +92,18 @@ def cmd_check(args) -> int:
     if failed:
         print(f"railpaper: {len(failed)} metric(s) out of tolerance", file=sys.stderr)
         return 1
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from railpaper.pipeline.compare import compare_runs, format_comparison
+    if args.out is not None and (args.out.suffix != ".csv" or not args.out.parent.is_dir()):
+        raise ValueError(f"compare --out {args.out}: expected a .csv file in an existing directory")
+    result = compare_runs(args.run_a, args.run_b)
+    print(format_comparison(result, args.run_a, args.run_b))
+    if args.out is not None:
+        result["metrics"].to_csv(args.out, index=False, float_format="%.17g")
+        print(f"railpaper: every metric of both runs written to {args.out}")
     return 0
 
 
@@ -198,6 +210,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("chapters", nargs="*")
     p.add_argument("--out", type=Path, help="run directory to check (one chapter only)")
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("compare", help="two runs of a chapter side by side: parameters, metrics, "
+                       "verdicts")
+    p.add_argument("run_a", type=Path, help="output directory of run A (holds metrics.json)")
+    p.add_argument("run_b", type=Path, help="output directory of run B")
+    p.add_argument("--out", type=Path, help="write every metric of both runs to this CSV")
+    p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("sweep", help="Monte Carlo sweep: grid values x seeds on dask workers")
     p.add_argument("chapter")
