@@ -81,7 +81,7 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
     chapters = book_chapters()
     for name in chapters:
         print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}", file=sys.stderr)
-        run_chapter(name, {}, quick, book / "chapters" / name, progress=progress)
+        run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
     write_ledger(book, chapters)
     write_environment(book)
     if (book / "performance.md").exists():

@@ -177,13 +177,16 @@ def hide_parameter_cells(notebook_path: Path) -> None:
 
 
 def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
-                out_dir: str | Path | None = None, progress: bool = True) -> Path:
+                out_dir: str | Path | None = None, progress: bool = True,
+                page: bool = True) -> Path:
     """Execute a chapter notebook with papermill; outputs land in ``out_dir`` only on success.
 
     Parameters are checked before any kernel starts.  The notebook runs in a staging directory
     beside ``out_dir``; on success the staging directory replaces ``out_dir``, on failure
     (error, interrupt) it is removed and the previous good outputs stay untouched.  The kernel's
-    stderr goes to ``.<out_dir name>.kernel.log`` beside ``out_dir``.
+    stderr goes to ``.<out_dir name>.kernel.log`` beside ``out_dir``.  With ``page``, the executed
+    notebook is also rendered as a web page, ``out_dir/index.html`` (see
+    :mod:`railpaper.pipeline.page`; the book renders its chapters itself).
 
     Returns
     -------
@@ -225,6 +228,9 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
             if not (staging / "metrics.json").exists():
                 raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
             hide_parameter_cells(staging / spec.notebook)
+            if page:
+                from railpaper.pipeline.page import render_run_page
+                render_run_page(staging, spec.notebook, spec.title)
         except BaseException as exc:
             shutil.rmtree(staging, ignore_errors=True)
             if isinstance(exc, papermill.PapermillExecutionError):

@@ -1,0 +1,39 @@
+"""A run is something to read: `railpaper run` writes DIR/index.html, the executed chapter as a
+web page with its figures, typeset math and the claims judged on this run."""
+
+import json
+import re
+
+import pytest
+
+from conftest import railpaper_cli
+from test_book import rendered_dom
+
+pytestmark = pytest.mark.slow
+CHAPTER = "partial-state-observer"
+
+
+def test_run_page_renders_offline(quick_run_dir, tmp_path):
+    out = quick_run_dir(CHAPTER)
+    index = out / "index.html"
+    target = re.search(r'url=([^"]+)"', index.read_text()).group(1)
+    page = out / target
+    assert page.exists()
+    html = page.read_text()
+    assert 'class="verdict verdict-' in html           # the claims section, judged on this run
+    assert "Non-default parameters" not in html
+    dom, errors = rendered_dom(page, tmp_path / "profile")
+    assert not errors, errors
+    assert dom.count("<mjx-container") >= 1
+    for src in re.findall(r'<img[^>]+src="([^"]+)"', dom):
+        assert (page.parent / src).resolve().exists(), src
+
+
+def test_run_page_marks_non_default_parameters(tmp_path):
+    out = tmp_path / "run"
+    result = railpaper_cli("run", CHAPTER, "--quick", "-p", "seed", "3", "--out", str(out))
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert json.loads((out / "metrics.json").read_text())["parameters"]["seed"] == 3
+    html = next((out / "page").glob("*.html"), None)
+    text = (out / "page" / "partial_state_observer.html").read_text()
+    assert html is not None and "Non-default parameters: seed." in text
