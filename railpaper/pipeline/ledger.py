@@ -224,27 +224,33 @@ def non_default_note(chapter: str, run: dict | None) -> str:
             "the book's ledger is judged on a default run.\n\n")
 
 
-def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
-    """A chapter's claims section: its ledger rows judged on the run in ``out_dir``.
-
-    Called by the chapter notebook after it wrote ``metrics.json``; the intro's ledger renders
-    the same rows with the same :func:`chapter_table`.
-    """
-    from railpaper.pipeline.outputs import claims
+def chapter_claims(chapter: str, out_dir: str | Path) -> str:
+    """A chapter's ledger rows judged on the run in ``out_dir``: a note when the parameters are
+    not the defaults, the verdict counts, and the same :func:`chapter_table` as the intro."""
     rows, run = run_rows(chapter, out_dir)
-    table = claims(chapter)
-    rules = ["", "How each verdict is decided (the rule, fixed from the paper's wording, and why):",
-             ""]
-    for r in rows:
-        row = table[r.key]
+    return (non_default_note(chapter, run) + f"{len(rows)} claims: {summary(rows)}.\n\n"
+            + chapter_table(rows))
+
+
+def chapter_rules(chapter: str) -> str:
+    """How each of a chapter's verdicts is decided: the rule, fixed from the paper's wording,
+    and why (a Markdown list, one item per claim and reading)."""
+    from railpaper.pipeline.outputs import claims
+    lines = ["How each verdict is decided (the rule, fixed from the paper's wording, and why):", ""]
+    for key, row in claims(chapter).items():
+        check_row(key, row, f"data/{chapter}/claims.toml")
         what = row.get("rule") or row.get("otherwise", {}).get("reason", "")
-        reading = f" — reading: {r.reading}" if r.reading else ""
+        reading = f" — reading: {row['reading']}" if row.get("reading") else ""
         why = f" *Why:* {row['justification']}" if row.get("justification") else ""
         selects = (f" (selected by `{row['reading_parameter']}`)"
                    if row.get("reading_parameter") else "")
-        rules.append(f"- **{r.claim}**{reading}{selects}: {what}{why}".replace("\n", " "))
-    return (non_default_note(chapter, run) + f"{len(rows)} claims: {summary(rows)}.\n\n"
-            + chapter_table(rows) + "\n".join(rules) + "\n")
+        lines.append(f"- **{row['claim']}**{reading}{selects}: {what}{why}".replace("\n", " "))
+    return "\n".join(lines) + "\n"
+
+
+def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
+    """A chapter's claims section: :func:`chapter_claims` followed by :func:`chapter_rules`."""
+    return chapter_claims(chapter, out_dir) + "\n" + chapter_rules(chapter)
 
 
 def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None) -> str:
