@@ -30,7 +30,7 @@ def test_compute_bands_runs_disjoint_batches_and_resumes(monkeypatch, tmp_path):
     chapter = "reduced-order-observer"
     calls = []
 
-    def fake_run(name, overrides, quick, out, progress):
+    def fake_run(name, overrides, quick, out, progress, page):
         calls.append(overrides["seed"])
         out.mkdir(parents=True)
         from railpaper.pipeline.chapters import chapter_spec

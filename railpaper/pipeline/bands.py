@@ -72,7 +72,7 @@ def _batch_metrics(chapter: str, quick: bool, seed: int, work: Path) -> dict:
         run = json.loads(path.read_text())
         if run.get("parameters") == params:                # a finished batch: resume
             return _values(out)
-    run_chapter(chapter, {"seed": seed}, quick, out, progress=False)
+    run_chapter(chapter, {"seed": seed}, quick, out, progress=False, page=False)
     return _values(out)
 
 
