@@ -26,7 +26,24 @@ def test_outputs_complete(quick_run_dir):
         assert col in ts.columns
     timings = json.loads((out / "timings.json").read_text())["metrics"]
     assert "time_ratio_qgrbpf_over_rbpf" in timings
+    assert timings["time_ratio_paired_qgrbpf_over_rbpf_n"] == len(
+        pd.read_csv(out / "timing_samples.csv")) >= 5
     assert len(list(out.glob("*.png"))) >= 4
+
+
+def test_claims_section_is_the_ledger(quick_run_dir):
+    """The notebook's claims section renders the ledger rows of this run (no chapter-specific
+    verdicts), every row of claims.toml judged, none missing, each on >= 5 Monte Carlo samples."""
+    from railpaper.pipeline.ledger import chapter_markdown, run_rows
+    out = quick_run_dir(CHAPTER)
+    rows, run = run_rows(CHAPTER, out)
+    assert [r.verdict for r in rows if r.verdict == "missing"] == []
+    assert all(r.n_samples is not None and r.n_samples >= 5 for r in rows if r.ours != "-")
+    cells = json.loads((out / "quasi_gaussian_rbpf.ipynb").read_text())["cells"]
+    assert not any("claims_table" in "".join(c["source"]) for c in cells)
+    shown = ["".join(o["data"]["text/markdown"]) for c in cells for o in c.get("outputs", [])
+             if "text/markdown" in o.get("data", {})]
+    assert chapter_markdown(CHAPTER, out) in shown
 
 
 def test_final_errors_are_the_timeseries_last_row(quick_run_dir):

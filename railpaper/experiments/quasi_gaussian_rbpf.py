@@ -7,7 +7,8 @@ One record of paper 004's toy (Eqs. 20–21, our reading) is filtered by
 * ``qgrbpf``          — the Q-GRBPF with Eq. (10) read as an importance ratio (= 1);
 * ``qgrbpf_printed``  — the Q-GRBPF with Eq. (10) read literally (weights = Gaussian density),
 
-and compared with the exact posterior of (a, b) on a grid (uniform prior on the paper-style box).
+(and both Q-GRBPFs once more without their weight threshold, same random stream, for the
+threshold claim) and compared with the exact posterior of (a, b) on a grid (uniform prior on the paper-style box).
 Convergence is judged against the exact posterior: a filter "converges at step k" when from
 step k on its estimate stays within two posterior standard deviations of the posterior mean
 (−1: outside at the last step).  For comparison with the paper we also report the first step at
@@ -15,24 +16,30 @@ which the estimate gets within ``tolerance_to_truth`` of the true value.  The sa
 for ``n_monte_carlo`` records (replicate ``record`` is the main record, the others follow it); the
 records other than the main one are run by a caller-supplied function (the notebook runs them as a
 sweep on worker processes, each sample being this module's ``run`` for one record) or in this
-process.  The computing time of each filter is measured on the main record for several particle
-counts.
+process.  The statistics the claim rules read are computed from the records by
+:mod:`~railpaper.experiments.quasi_gaussian_rbpf_evidence`; the computing times (curves over N and
+paired repeats at the paper's N) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf_timing`.
+``eq10_reading`` only selects which Q-GRBPF the illustrations show in full: the evidence of both
+readings is always computed.
 """
 
 from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 import pandas as pd
 
 from railpaper.estimators.grid_posterior import grid_posterior
-from railpaper.estimators.particles import systematic_resample
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_filter
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
                                         no_progress)
-from railpaper.experiments.quasi_gaussian_rbpf_claims import claims_table  # noqa: F401
+from railpaper.experiments.quasi_gaussian_rbpf_evidence import (FILTERS, NO_THRESHOLD, PARAMS,
+                                                          QGRBPF_READINGS, descriptive_metrics,
+                                                          evidence_metrics)
+from railpaper.experiments.quasi_gaussian_rbpf_timing import timing
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
 from railpaper.settling import settled_index
 
@@ -42,7 +49,8 @@ SPEC = ChapterSpec(
     title="Quasi-Gaussian RBPF versus RBPF for parameter estimation",
     paper="004_e1cb56090c839832.txt",
     notebook="quasi_gaussian_rbpf.ipynb",
-    quick_sizes="300 particles, 200 steps, 61x61 grid, 8 Monte Carlo records, timing up to N=1000",
+    quick_sizes="300 particles, 200 steps, 61x61 grid, 20 Monte Carlo records, timing up to N=1000, "
+                "8 paired timing repeats",
     notebook_requires={"timing": True},
     parameters=[
         P("a_true", -0.7, "float", "true parameter a of Eq. (20), 1"),
@@ -66,9 +74,11 @@ SPEC = ChapterSpec(
           minimum=0),
         P("weight_threshold", 0.01, "float",
           "Q-GRBPF drops likelihood weights below weight_threshold/N, 1", minimum=0.0),
+        P("eq10_reading", "ratio", "str", "reading of Eq. (10) the illustrations show in full: "
+          "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
         P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
           quick=61, minimum=3),
-        P("n_monte_carlo", 50, "int", "records (seeds) of the Monte Carlo study", quick=8,
+        P("n_monte_carlo", 50, "int", "records (seeds) of the Monte Carlo study", quick=20,
           minimum=1),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
           "Monte Carlo records are record+1, record+2, …", minimum=0),
@@ -79,8 +89,12 @@ SPEC = ChapterSpec(
           positive=True),
         P("timing_steps", 100, "int", "steps timed per filter and particle count", quick=50,
           minimum=1),
-        P("timing_repeats", 3, "int", "repeats per timing (the fastest is kept)", quick=3,
-          minimum=1),
+        P("timing_repeats", 3, "int", "repeats per timing of the curves (the fastest is kept)",
+          quick=3, minimum=1),
+        P("timing_ratio_particles", 1000, "int", "particles of the paired timing repeats (the "
+          "paper's N)", minimum=2),
+        P("timing_ratio_repeats", 20, "int", "paired timing repeats (RBPF and both Q-GRBPFs back "
+          "to back) behind the time-ratio evidence", quick=8, minimum=1),
         P("tolerance_to_truth", 0.05, "float",
           "paper-like convergence: first step with |estimate - truth| below this, 1",
           positive=True),
@@ -88,8 +102,7 @@ SPEC = ChapterSpec(
     ],
 )
 
-FILTERS = ("rbpf", "rbpf_working", "qgrbpf", "qgrbpf_printed")
-PARAMS = ("a", "b")
+EQ10_READINGS = ("ratio", "printed")
 
 
 def validate(p: dict) -> None:
@@ -107,6 +120,9 @@ def validate(p: dict) -> None:
     if not p["weight_threshold"] < 1.0:
         raise ParameterError(f"weight_threshold must be < 1 (a fraction of 1/N), "
                              f"got {p['weight_threshold']}")
+    if p["eq10_reading"] not in EQ10_READINGS:
+        raise ParameterError(f"eq10_reading must be one of {', '.join(EQ10_READINGS)}, "
+                             f"got {p['eq10_reading']!r}")
     if max(p["timing_particles"]) < 2:
         raise ParameterError("timing_particles needs at least one count >= 2")
 
@@ -116,6 +132,7 @@ def _box(p: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _make_filter(name: str, p: dict, system, theta0, rng):
+    """Filter ``name`` (one of FILTERS, or a Q-GRBPF name + NO_THRESHOLD)."""
     x0, P0 = np.zeros(2), p["p0_std"] ** 2 * np.eye(2)
     if name == "rbpf":
         return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="paper",
@@ -124,9 +141,11 @@ def _make_filter(name: str, p: dict, system, theta0, rng):
         return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="working",
                                   delta=p["liu_west_delta"], ess_fraction=p["ess_fraction"],
                                   tempering_steps=p["tempering_steps"])
-    weighting = "printed" if name == "qgrbpf_printed" else "ratio"
+    base = name.removesuffix(NO_THRESHOLD)
+    weighting = "printed" if base == "qgrbpf_printed" else "ratio"
+    threshold = 0.0 if name.endswith(NO_THRESHOLD) else p["weight_threshold"]
     return QuasiGaussianRBPF(system, theta0, x0, P0, rng, weighting=weighting,
-                             weight_threshold=p["weight_threshold"])
+                             weight_threshold=threshold)
 
 
 def _streams(seed: int, replicate: int) -> dict[str, np.random.Generator]:
@@ -157,7 +176,8 @@ def settling_step(estimate: np.ndarray, tolerance: float) -> int:
 
 
 def replicate(p: dict, index: int) -> dict:
-    """Simulate record ``index``, run the four filters and the exact posterior on it."""
+    """Simulate record ``index``, run the four filters, the two Q-GRBPFs without threshold (on
+    the same random streams as with it) and the exact posterior on it."""
     streams = _streams(p["seed"], index)
     system = paper004_system(p["q_var"], p["r_var"])
     sim = simulate_paper004(p["a_true"], p["b_true"], p["q_var"], p["r_var"], p["p0_std"],
@@ -168,11 +188,15 @@ def replicate(p: dict, index: int) -> dict:
                            p["p0_std"] ** 2 * np.eye(2))
     runs = {name: run_filter(_make_filter(name, p, system, theta0, streams[name]), sim.y)
             for name in FILTERS}
-    return dict(sim=sim, exact=exact, runs=runs)
+    off = {q + NO_THRESHOLD: run_filter(_make_filter(q + NO_THRESHOLD, p, system, theta0,
+                                                     _streams(p["seed"], index)[q]), sim.y)
+           for q in QGRBPF_READINGS}
+    return dict(sim=sim, exact=exact, runs=runs, runs_nothreshold=off)
 
 
-def _record_metrics(p: dict, rep: dict) -> dict:
-    """Per-record metrics (all filters, both parameters)."""
+def record_metrics(p: dict, rep: dict) -> dict:
+    """Per-record metrics (all filters, both parameters; final error and z of the Q-GRBPFs
+    without threshold)."""
     exact, truth = rep["exact"], (p["a_true"], p["b_true"])
     m = {}
     for j, par in enumerate(PARAMS):
@@ -191,43 +215,10 @@ def _record_metrics(p: dict, rep: dict) -> dict:
             m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
             m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
             m[f"final_std_ratio_{par}_{name}"] = run.theta_std[-1, j] / std[-1]
-    return m
-
-
-def _quantile_steps(steps: np.ndarray, n_steps: int, q: float) -> int:
-    """Quantile of convergence steps with 'never' (−1) counted as later than the last step."""
-    value = np.quantile(np.where(steps < 0, n_steps + 1, steps), q, method="inverted_cdf")
-    return -1 if value > n_steps else int(value)
-
-
-def _monte_carlo_metrics(p: dict, table: pd.DataFrame) -> dict:
-    m = {"mc_records": len(table)}
-    for par in PARAMS:
-        for name in FILTERS:
-            steps = table[f"convergence_step_{par}_{name}"].to_numpy()
-            for label, q in (("q10", 0.1), ("median", 0.5), ("q90", 0.9)):
-                m[f"mc_{label}_convergence_step_{par}_{name}"] = _quantile_steps(
-                    steps, p["n_steps"], q)
-            m[f"mc_never_converged_fraction_{par}_{name}"] = float(np.mean(steps < 0))
-            first = table[f"first_within_{par}_{name}"].to_numpy()
-            m[f"mc_median_first_within_{par}_{name}"] = _quantile_steps(first, p["n_steps"], 0.5)
-            settle = table[f"settling_step_{par}_{name}"].to_numpy()
-            m[f"mc_median_settling_step_{par}_{name}"] = _quantile_steps(settle, p["n_steps"], 0.5)
-            err = table[f"final_error_{par}_{name}"].to_numpy()
-            m[f"mc_median_abs_final_error_{par}_{name}"] = float(np.median(np.abs(err)))
-            m[f"mc_rms_final_error_{par}_{name}"] = float(np.sqrt(np.mean(err ** 2)))
-            z = table[f"final_z_{par}_{name}"].to_numpy()
-            m[f"mc_median_abs_final_z_{par}_{name}"] = float(np.median(np.abs(z)))
-            m[f"mc_within_2std_fraction_{par}_{name}"] = float(np.mean(np.abs(z) <= 2.0))
-            ratio = table[f"final_std_ratio_{par}_{name}"].to_numpy()
-            m[f"mc_median_final_std_ratio_{par}_{name}"] = float(np.median(ratio))
-        err = table[f"final_error_{par}_posterior"].to_numpy()
-        m[f"mc_median_abs_final_error_{par}_posterior"] = float(np.median(np.abs(err)))
-        m[f"mc_rms_final_error_{par}_posterior"] = float(np.sqrt(np.mean(err ** 2)))
-        m[f"mc_median_final_std_{par}_posterior"] = float(
-            np.median(table[f"final_std_{par}_posterior"]))
-        m[f"mc_median_settling_step_{par}_posterior"] = _quantile_steps(
-            table[f"settling_step_{par}_posterior"].to_numpy(), p["n_steps"], 0.5)
+        for name, run in rep["runs_nothreshold"].items():
+            est = run.theta_mean[:, j]
+            m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
+            m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
     return m
 
 
@@ -249,58 +240,17 @@ def _timeseries(p: dict, rep: dict) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def _resampling_cost(p: dict, counts: list[int], table: pd.DataFrame) -> dict:
-    """Seconds of one systematic resampling (indices + copying θ, x, P) as a share of an RBPF
-    step: the cost the paper says dominates."""
-    out = {}
-    rng = np.random.default_rng(p["seed"])
-    for n in counts:
-        w = rng.random(n)
-        w /= w.sum()
-        arrays = (rng.random((n, 2)), rng.random((n, 2)), rng.random((n, 2, 2)))
-        best = np.inf
-        for _ in range(p["timing_repeats"]):
-            start = time.perf_counter()
-            for _ in range(20):
-                idx = systematic_resample(w, rng)
-                _ = [a[idx] for a in arrays]
-            best = min(best, (time.perf_counter() - start) / 20)
-        step = table.query("filter == 'rbpf' and n_particles == @n")["seconds_per_step"].iloc[0]
-        out[f"resampling_share_of_rbpf_step_N{n}"] = best / step
-    return out
-
-
-def _timing(p: dict, y: np.ndarray, progress) -> tuple[dict, pd.DataFrame]:
-    """Seconds per step of every filter at every N (fastest of ``timing_repeats``)."""
+def _timing(p: dict, y: np.ndarray, progress):
+    """Computing times on the main record (:func:`quasi_gaussian_rbpf_timing.timing`)."""
     system = paper004_system(p["q_var"], p["r_var"])
     lower, upper = _box(p)
-    counts = sorted(set(int(n) for n in p["timing_particles"] if n >= 2) | {p["n_particles"]})
-    y = y[: p["timing_steps"]]
-    rows = []
-    for i, n in enumerate(counts):
-        progress(0.9 + 0.1 * i / len(counts), f"timing N={n}")
-        best = {name: np.inf for name in FILTERS}
-        for r in range(p["timing_repeats"]):
-            for name in FILTERS:                       # interleaved: same machine load
-                streams = _streams(p["seed"], 10_000 + r)
-                theta0 = lower + (upper - lower) * streams["prior"].random((n, 2))
-                filt = _make_filter(name, p, system, theta0, streams[name])
-                start = time.perf_counter()
-                run_filter(filt, y)
-                best[name] = min(best[name], (time.perf_counter() - start) / len(y))
-        rows += [dict(filter=name, n_particles=n, seconds_per_step=best[name]) for name in FILTERS]
-    table = pd.DataFrame(rows)
-    timings = _resampling_cost(p, counts, table)
-    timings.update({f"seconds_per_step_{r.filter}_N{r.n_particles}": r.seconds_per_step
-               for r in table.itertuples()})
-    per = table.pivot(index="n_particles", columns="filter", values="seconds_per_step")
-    for n in per.index:
-        timings[f"time_ratio_qgrbpf_over_rbpf_N{n}"] = per.loc[n, "qgrbpf"] / per.loc[n, "rbpf"]
-    timings["time_ratio_qgrbpf_over_rbpf"] = timings[
-        f"time_ratio_qgrbpf_over_rbpf_N{p['n_particles']}"]
-    timings["time_saving_qgrbpf_vs_rbpf_percent"] = 100.0 * (
-        1.0 - timings["time_ratio_qgrbpf_over_rbpf"])
-    return timings, table
+
+    def make_filter(name: str, n: int, repeat: int):
+        streams = _streams(p["seed"], repeat)
+        theta0 = lower + (upper - lower) * streams["prior"].random((n, 2))
+        return _make_filter(name, p, system, theta0, streams[name])
+
+    return timing(p, make_filter, FILTERS, y, progress)
 
 
 def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.DataFrame:
@@ -308,7 +258,7 @@ def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.
     rows = []
     for i, index in enumerate(records):
         progress(0.9 * (i + 1) / (len(records) + 1), f"Monte Carlo record {i + 1}/{len(records)}")
-        rows.append(dict(replicate=index, **_record_metrics(p, replicate(p, index))))
+        rows.append(dict(replicate=index, **record_metrics(p, replicate(p, index))))
     return pd.DataFrame(rows)
 
 
@@ -328,13 +278,30 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> Ch
         Default: :func:`records_in_process`.
     **params
         Chapter parameters (:data:`SPEC`).
+
+    Notes
+    -----
+    Runs on one numba thread (restored afterwards): the parallel Kalman bank with two threads
+    on a machine busy with other processes waits for its threads most of the time (8 quick
+    records: 36 s at load 7 on 2 cores, 3.8 s on one thread); the Monte Carlo records run on
+    sweep workers, one thread each, anyway.
     """
     progress = progress or no_progress
     p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
     validate(p)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        return _run(p, progress, monte_carlo)
+    finally:
+        numba.set_num_threads(threads)
+
+
+def _run(p: dict, progress, monte_carlo) -> ChapterResult:
+    """:func:`run` on resolved, validated parameters, on one numba thread."""
     start = time.perf_counter()
     main = replicate(p, p["record"])
-    first = dict(replicate=p["record"], **_record_metrics(p, main))
+    first = dict(replicate=p["record"], **record_metrics(p, main))
     records = list(range(p["record"] + 1, p["record"] + p["n_monte_carlo"]))
     mc_table = pd.DataFrame([first])
     if records:
@@ -347,19 +314,19 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> Ch
         mc_table = pd.concat([mc_table, others], ignore_index=True)
     mc_seconds = time.perf_counter() - start
     metrics = {k: v for k, v in first.items() if k != "replicate"}
-    metrics.update(_monte_carlo_metrics(p, mc_table))
+    metrics.update(descriptive_metrics(mc_table, p["n_steps"]))
+    metrics.update(evidence_metrics(mc_table, {"a": p["a_true"], "b": p["b_true"]}))
     exact = main["exact"]
     metrics["grid_min_std_over_spacing"] = exact.min_std_over_spacing
     metrics["grid_edge_mass"] = exact.edge_mass
-    metrics["paper_accuracy_gain_a_percent"] = 100.0 * (
-        abs(metrics["final_error_a_rbpf"]) - abs(metrics["final_error_a_qgrbpf"])) / abs(p["a_true"])
-    metrics["paper_accuracy_gain_b_percent"] = 100.0 * (
-        abs(metrics["final_error_b_rbpf"]) - abs(metrics["final_error_b_qgrbpf"])) / abs(p["b_true"])
-    timings, timing_table = _timing(p, main["sim"].y, progress) if p["timing"] else ({}, None)
+    timings, timing_table, timing_samples = (_timing(p, main["sim"].y, progress) if p["timing"]
+                                             else ({}, None, None))
     timings["monte_carlo_seconds"] = mc_seconds
     progress(1.0, "done")
     return ChapterResult(
         metrics=metrics, timings=timings, timeseries=_timeseries(p, main),
-        extra_tables={"monte_carlo": mc_table},
-        data={"timing_table": timing_table, "exact": exact, "runs": main["runs"],
+        extra_tables=dict({"monte_carlo": mc_table},
+                          **({} if timing_samples is None else {"timing_samples": timing_samples})),
+        data={"timing_table": timing_table, "timing_samples": timing_samples, "exact": exact,
+              "runs": main["runs"], "runs_nothreshold": main["runs_nothreshold"],
               "sim": main["sim"], "monte_carlo": mc_table, "filters": FILTERS})
