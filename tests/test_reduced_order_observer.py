@@ -44,6 +44,31 @@ def test_contact_stiffness_from_hertz(vehicle):
     assert vehicle.contact_stiffness_N_per_m == pytest.approx(2 * 1.5 / G * P0 ** (1 / 3), rel=1e-12)
 
 
+def test_p0_readings():
+    """P0 per wheelset (Eq. 3's text): one contact at the wheelset's static load."""
+    G = 3.86 * 0.42 ** -0.115 * 1e-8
+    wheelset = sw.load_parameters(p0_basis="wheelset")
+    assert wheelset.contacts == 1
+    assert wheelset.static_wheel_load_N == pytest.approx((41800 + 1800) * 9.8)
+    assert wheelset.contact_stiffness_N_per_m == pytest.approx(
+        1.5 / G * ((41800 + 1800) * 9.8) ** (1 / 3), rel=1e-12)
+    ratio = wheelset.contact_stiffness_N_per_m / sw.load_parameters().contact_stiffness_N_per_m
+    assert ratio == pytest.approx(2 ** (-2 / 3), rel=1e-12)
+    with pytest.raises(ValueError, match="p0_basis"):
+        sw.load_parameters(p0_basis="axle")
+
+
+def test_wheelset_reading_is_jacobian_of_its_hertz_model():
+    vehicle = sw.load_parameters(p0_basis="wheelset")
+    A, B = sw.state_space(vehicle)
+    h = 1e-9
+    jac = (sw.nonlinear_derivative(vehicle, h * np.eye(4)[3], 0.0)
+           - sw.nonlinear_derivative(vehicle, -h * np.eye(4)[3], 0.0)) / (2 * h)
+    np.testing.assert_allclose(jac, A[:, 3], rtol=1e-5)
+    force = sw.dynamic_contact_force_N(vehicle, 1e-7, 0.0, "hertz")
+    assert force == pytest.approx(vehicle.contact_stiffness_N_per_m * 1e-7, rel=1e-3)
+
+
 @pytest.mark.parametrize("poles", [[-30.0, -40.0], [-5.0, -80.0], [-150.0, -200.0]])
 def test_observer_poles_placed(vehicle, poles):
     A, B = sw.state_space(vehicle)

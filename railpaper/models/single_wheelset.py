@@ -7,8 +7,15 @@ from static equilibrium; input ``q`` = vertical track irregularity under the whe
     M_w z̈_w =  K_p (z_c − z_w) + C_p (ż_c − ż_w) − K_r (z_w − q)
 
 with the errata fixed (Eqs. 5-6 print first derivatives; row 3 of A divides by M_c; Table 1
-prints K_p in N/mm).  K_r is the wheelset's linearised contact stiffness: two wheels, each with
-the per-wheel stiffness 3/(2G) P0^(1/3) at the per-wheel static load P0 = (M_c + M_w) g / 2.
+prints K_p in N/mm).  K_r is the wheelset's linearised contact stiffness (Eq. 3), under one of
+two readings of the paper's P0 (``p0_basis``):
+
+* ``"wheel"`` (the chapter's default): Hertz acts per wheel–rail contact, so the wheelset has two
+  contacts, each at the per-wheel static load P0 = (M_c + M_w) g / 2 with the stiffness
+  3/(2G) P0^(1/3); K_r = 2 · 3/(2G) P0^(1/3);
+* ``"wheelset"`` (the text's words, "P0 is the wheelset static load"): Eq. (3) applied once to
+  the wheelset's static load P0 = (M_c + M_w) g, one contact; K_r = 3/(2G) P0^(1/3), a factor
+  2^(-2/3) ≈ 0.63 of the other reading.
 """
 
 from __future__ import annotations
@@ -19,6 +26,9 @@ import numpy as np
 
 from railpaper import contact
 from railpaper.data import data_path, load_quantities, values
+
+#: Readings of the paper's P0 (Eq. 3): per wheel (two contacts) or per wheelset (one contact).
+P0_BASES = ("wheel", "wheelset")
 
 PARAMETER_KEYS = (
     "car_body_mass_kg", "wheelset_mass_kg", "suspension_damping_Ns_per_m",
@@ -38,6 +48,11 @@ class SingleWheelset:
     gravity_m_per_s2: float
     measurement_noise_D: float = 0.01
     tread: str = "worn"
+    p0_basis: str = "wheel"
+
+    def __post_init__(self):
+        if self.p0_basis not in P0_BASES:
+            raise ValueError(f"p0_basis must be one of {P0_BASES}, got {self.p0_basis!r}")
 
     @property
     def hertz_constant_m_per_N23(self) -> float:
@@ -45,15 +60,20 @@ class SingleWheelset:
         return contact.hertz_constant(self.wheel_radius_m, self.tread)
 
     @property
+    def contacts(self) -> int:
+        """Number of Hertz contacts carrying the wheelset: 2 (``"wheel"``) or 1 (``"wheelset"``)."""
+        return 2 if self.p0_basis == "wheel" else 1
+
+    @property
     def static_wheel_load_N(self) -> float:
-        """Per-wheel static load P0 = (M_c + M_w) g / 2, N."""
-        return (self.car_body_mass_kg + self.wheelset_mass_kg) * self.gravity_m_per_s2 / 2.0
+        """Static load P0 of one contact, N: (M_c + M_w) g / contacts."""
+        return (self.car_body_mass_kg + self.wheelset_mass_kg) * self.gravity_m_per_s2 / self.contacts
 
     @property
     def contact_stiffness_N_per_m(self) -> float:
-        """Wheelset contact stiffness K_r = 2 · 3/(2G) P0^(1/3) (two wheels), N/m."""
-        return 2.0 * contact.linearised_stiffness(self.static_wheel_load_N,
-                                                  self.hertz_constant_m_per_N23)
+        """Wheelset contact stiffness K_r = contacts · 3/(2G) P0^(1/3), N/m."""
+        return self.contacts * contact.linearised_stiffness(self.static_wheel_load_N,
+                                                            self.hertz_constant_m_per_N23)
 
 
 def load_parameters(path=None, **overrides) -> SingleWheelset:
@@ -100,18 +120,19 @@ def nonlinear_derivative(vehicle: SingleWheelset, x: np.ndarray, q_m: float) -> 
     G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
     delta0 = contact.static_compression(P0, G)
     suspension = Kp * (x[1] - x[3]) + Cp * (x[0] - x[2])
-    dynamic_contact = 2.0 * (contact.hertz_force(delta0 + x[3] - q_m, G) - P0)
+    dynamic_contact = vehicle.contacts * (contact.hertz_force(delta0 + x[3] - q_m, G) - P0)
     return np.array([-suspension / Mc, x[0], (suspension - dynamic_contact) / Mw, x[2]])
 
 
 def dynamic_contact_force_N(vehicle: SingleWheelset, z_w_m, q_m, plant: str = "linear"):
-    """Dynamic wheel–rail force on the wheelset (total minus static load 2 P0), N, compression +.
+    """Dynamic wheel–rail force on the wheelset (total minus static load n P0), N, compression +.
 
-    ``plant="linear"``: K_r (z_w − q) (Eq. 4); ``plant="hertz"``: 2[(δ0 + z_w − q)/G]^1.5 − 2 P0.
+    ``plant="linear"``: K_r (z_w − q) (Eq. 4); ``plant="hertz"``: n[(δ0 + z_w − q)/G]^1.5 − n P0,
+    with n = ``vehicle.contacts``.
     """
     z_w_m, q_m = np.asarray(z_w_m, float), np.asarray(q_m, float)
     if plant == "linear":
         return vehicle.contact_stiffness_N_per_m * (z_w_m - q_m)
     G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
     delta0 = contact.static_compression(P0, G)
-    return 2.0 * (contact.hertz_force(delta0 + z_w_m - q_m, G) - P0)
+    return vehicle.contacts * (contact.hertz_force(delta0 + z_w_m - q_m, G) - P0)
