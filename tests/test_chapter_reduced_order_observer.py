@@ -1,6 +1,7 @@
 """The reduced-order-observer chapter end to end through papermill (quick mode)."""
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -80,15 +81,57 @@ def test_notebook_and_library_give_identical_metrics(quick_run_dir):
             "rank_Q0_Q1_exact_min"} <= set(direct)
 
 
-def test_claims_section_renders_the_ledger_rows(quick_run_dir):
-    from railpaper.pipeline.ledger import chapter_markdown
+def _outputs(notebook: dict, mime: str) -> str:
+    def text(value):
+        return value if isinstance(value, str) else "".join(value)
+    return "".join(text(o.get("data", {}).get(mime, "")) for c in notebook["cells"]
+                   if c["cell_type"] == "code" for o in c.get("outputs", []))
+
+
+def test_page_opens_with_reference_claims_and_rerun_box(quick_run_dir):
+    """Issue 14's page top: title, reference, claims table (glued once, shown at the top), re-run
+    box; the rules at the end; no code cell needs a name the page does not explain."""
+    from railpaper.pipeline.header import reference_markdown, rerun_markdown
+    from railpaper.pipeline.ledger import chapter_claims, chapter_rules
     out = quick_run_dir(CHAPTER)
     notebook = json.loads((out / "reduced_order_observer.ipynb").read_text())
-    shown = "".join(o.get("data", {}).get("text/markdown", "") if isinstance(
-        o.get("data", {}).get("text/markdown", ""), str) else "".join(o["data"]["text/markdown"])
-        for c in notebook["cells"] if c["cell_type"] == "code" for o in c.get("outputs", []))
-    assert chapter_markdown(CHAPTER, out) in shown
+    cells = notebook["cells"]
+    assert "".join(cells[0]["source"]).startswith(f"# {chapter.SPEC.title}\n")
+    shown = _outputs(notebook, "text/markdown")
+    glued = _outputs(notebook, "application/papermill.record/text/markdown")
+    assert glued == chapter_claims(CHAPTER, out)
+    assert reference_markdown(CHAPTER) in shown and rerun_markdown(CHAPTER) in shown
+    assert chapter_rules(CHAPTER) in shown and chapter_claims(CHAPTER, out) not in shown
+    top = "".join("".join(c["source"]) for c in cells[:6] if c["cell_type"] == "markdown")
+    assert top.count("{glue:md} claims_table") == 1
+    markdown = "".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
+    assert "(claims-reduced-order-observer)=" in markdown
+    for word in ("paper 001", "claims.toml", "railpaper.pipeline", "shared/papers"):
+        assert word not in markdown
+    visible = [c for c in cells if c["cell_type"] == "code"
+               and not {"remove-cell", "remove-input", "hide-input", "parameters",
+                        "injected-parameters"} & set(c["metadata"].get("tags", []))]
+    for cell in visible:
+        for name in ("overrides", "out_dir", "quick"):
+            assert name not in "".join(cell["source"]).replace("quick_", ""), cell["source"]
     assert not hasattr(chapter, "claims_table")
+
+
+def test_page_has_numbered_figures_and_no_stray_output(quick_run_dir):
+    out = quick_run_dir(CHAPTER)
+    notebook = json.loads((out / "reduced_order_observer.ipynb").read_text())
+    markdown = "".join("".join(c["source"]) for c in notebook["cells"] if c["cell_type"] == "markdown")
+    figures = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-roo-[\w-]+)", markdown)
+    assert len(figures) >= 5
+    for name, label in figures:
+        assert (out / f"{name}.png").exists()
+        assert f"{{numref}}`{label}`" in markdown, label
+    text = _outputs(notebook, "text/plain") + _outputs(notebook, "text/markdown")
+    text += "".join(o.get("text", "") if isinstance(o.get("text", ""), str) else "".join(o["text"])
+                    for c in notebook["cells"] if c["cell_type"] == "code"
+                    for o in c.get("outputs", []))
+    for stray in ("PosixPath(", "dtype:", "<Figure size", "…", "-1.000", "NaN"):
+        assert stray not in text, stray
 
 
 def test_rerun_with_other_speeds_keys_metrics_by_speed(tmp_path):

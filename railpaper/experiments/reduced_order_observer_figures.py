@@ -1,0 +1,168 @@
+"""Figures of chapter ``reduced-order-observer`` (matplotlib, ≤ 7 in wide, legends outside the data).
+
+Each function takes the run's named results (:class:`ReducedOrderObserverResult`) and its
+parameters and returns the figure; the notebook saves it and shows it as a numbered MyST figure.
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+#: Display names of the two discretisations of the paper's observer.
+OBSERVER_NAMES = {"paper": "paper's observer (ZOH)", "foh": "observer, FOH discretisation"}
+
+
+def _legend_below(fig, handles, labels, ncol: int = 3) -> None:
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=ncol,
+               frameon=False)
+
+
+def _never_as_nan(values) -> np.ndarray:
+    values = np.asarray(values, float)
+    return np.where(values < 0, np.nan, values)
+
+
+def displacement(result, params):
+    """Per speed: true and observed z_w (top) and |error| on a log scale with the convergence
+    threshold and time (bottom)."""
+    speeds = params["speeds_kmh"]
+    fig, axes = plt.subplots(2, len(speeds), figsize=(7, 4.8), squeeze=False, sharex=True)
+    for j, speed in enumerate(speeds):
+        r = result.runs[speed]
+        t, z = r.record.t_s, r.record.x_true[:, 3]
+        est = r.observer(params["observer_form"])
+        top, bottom = axes[0, j], axes[1, j]
+        top.plot(t, z * 1e3, lw=2.0, color="C0")
+        top.plot(t, est.z_w_est_m * 1e3, lw=0.9, ls="--", color="C1")
+        bottom.semilogy(t, np.abs(est.z_w_est_m - z) * 1e3, lw=0.7, color="C1")
+        bottom.axhline(params["convergence_fraction"] * r.z_w_rms_m * 1e3, color="k", ls=":", lw=1.2)
+        if est.convergence_time_s >= 0:
+            for ax in (top, bottom):
+                ax.axvline(est.convergence_time_s, color="grey", lw=1.0)
+        top.set_title(f"{speed:g} km/h")
+        bottom.set_xlabel("time (s)")
+    axes[0, 0].set_ylabel("$z_w$ (mm)")
+    axes[1, 0].set_ylabel("$|\\hat z_w - z_w|$ (mm)")
+    handles = [Line2D([], [], lw=2.0, color="C0"), Line2D([], [], lw=0.9, ls="--", color="C1"),
+               Line2D([], [], color="k", ls=":", lw=1.2), Line2D([], [], color="grey", lw=1.0)]
+    labels = ["simulated $z_w$", f"estimate, {OBSERVER_NAMES[params['observer_form']]}",
+              "threshold: 5 % of RMS $z_w$", "convergence time"]
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def force(result, params, metrics, window_s: float = 0.1, moving_rms_s: float = 0.01):
+    """Per speed: true and observed force over ``window_s`` after the error window starts (left)
+    and the moving RMS of the force and of the error over the whole run, log scale (right)."""
+    speeds = params["speeds_kmh"]
+    fig, axes = plt.subplots(len(speeds), 2, figsize=(7, 2.5 * len(speeds) + 0.4), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1]})
+    n = int(round(moving_rms_s / params["dt_s"]))
+    moving = lambda x: np.sqrt(np.convolve(x**2, np.ones(n) / n, mode="same"))  # noqa: E731
+    start = params["error_window_start_s"]
+    for (left, right), speed in zip(axes, speeds):
+        r = result.runs[speed]
+        t, f_true = r.record.t_s, r.record.force_true_N
+        f_est = r.observer(params["observer_form"]).force_est_N
+        shown = (t >= start) & (t <= start + window_s)
+        left.plot(t[shown], f_est[shown] / 1e3, lw=0.6, color="C1")
+        left.plot(t[shown], f_true[shown] / 1e3, lw=1.6, color="C0")
+        ratio = metrics[f"force_relative_rms_error_{speed:g}kmh"]
+        left.set(title=f"{speed:g} km/h: RMS error = {ratio:.3g} × RMS force",
+                 ylabel="force (kN)")
+        right.semilogy(t, moving(f_true) / 1e3, lw=1.2, color="C0")
+        right.semilogy(t, moving(f_est - f_true) / 1e3, lw=0.8, color="C3")
+        right.axvline(start, color="grey", lw=0.8, ls=":")
+        right.set(title=f"{speed:g} km/h, {moving_rms_s * 1e3:g} ms moving RMS", ylabel="kN")
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    handles = [Line2D([], [], lw=1.6, color="C0"), Line2D([], [], lw=0.6, color="C1"),
+               Line2D([], [], lw=0.8, color="C3"), Line2D([], [], color="grey", lw=0.8, ls=":")]
+    labels = ["simulated dynamic force", "observed force", "error (observed − simulated)",
+              "start of the error window"]
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def trends(result, params):
+    """One record over the sweep speeds: convergence time (left), RMS force error (right)."""
+    sweep = result.speed_sweep
+    form = params["observer_form"]
+    other = "foh" if form == "paper" else "paper"
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(7, 3.2))
+    v = sweep.speed_kmh
+    ax1.plot(v, _never_as_nan(sweep.convergence_time_s), "o-", ms=7, color="C1")
+    ax1.plot(v, _never_as_nan(sweep[f"convergence_time_s_{other}"]), "s--", ms=4, color="C2")
+    ax1.plot(v, _never_as_nan(sweep.predicted_convergence_time_s), "k:", lw=1.5)
+    ax1.set(xlabel="speed (km/h)", ylabel="convergence time (s)")
+    ax2.semilogy(v, sweep.force_rms_error_N / 1e3, "o-", ms=7, color="C1")
+    ax2.semilogy(v, sweep[f"force_rms_error_N_{other}"] / 1e3, "s--", ms=4, color="C2")
+    ax2.semilogy(v, sweep.force_rms_N / 1e3, "^-", ms=5, color="C0")
+    ax2.set(xlabel="speed (km/h)", ylabel="RMS (kN)")
+    handles = [Line2D([], [], marker="o", ms=7, color="C1"),
+               Line2D([], [], marker="s", ms=4, ls="--", color="C2"),
+               Line2D([], [], ls=":", lw=1.5, color="k"), Line2D([], [], marker="^", color="C0")]
+    labels = [OBSERVER_NAMES[form], OBSERVER_NAMES[other], "error equation alone (left)",
+              "RMS of the force itself (right)"]
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def monte_carlo(result, params):
+    """Over seeds, the chapter's reading of P0: convergence time (boxes), RMS force error at
+    both noise models with the RMS force (median, 5–95 % band), relative force error (boxes)."""
+    t = result.monte_carlo[result.monte_carlo.reading == params["p0_basis"]]
+    speeds = sorted(t.speed_kmh.unique())
+    width = 0.25 * min(np.diff(speeds)) if len(speeds) > 1 else 5.0
+    med = t.groupby("speed_kmh").median(numeric_only=True)
+    fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    ax1.boxplot([t[t.speed_kmh == s].convergence_time_s for s in speeds], positions=speeds,
+                widths=width, whis=(5, 95), manage_ticks=False)
+    ax1.plot(speeds, med.predicted_convergence_time_s, "k:", lw=1.5,
+             label="error equation alone (median)")
+    ax1.set(ylabel="convergence time (s)", title="convergence time over seeds (boxes: quartiles, "
+            "whiskers 5–95 %)")
+    for column, label, style in (
+            ("force_rms_error_N", "error, noise σ ∝ channel RMS at each speed", "o-"),
+            ("force_rms_error_N_fixed_noise", "error, noise fixed at its 60 km/h level", "s--"),
+            ("force_rms_N", "RMS of the force itself", "^-")):
+        band = t.groupby("speed_kmh")[column].quantile([0.05, 0.95]).unstack() / 1e3
+        line, = ax2.plot(speeds, med[column] / 1e3, style, ms=4, label=label)
+        ax2.fill_between(band.index, band[0.05], band[0.95], alpha=0.2, color=line.get_color())
+    ax2.set(ylabel="RMS force / error (kN)", yscale="log",
+            title="RMS force error over seeds (median, 5–95 % band)")
+    ax3.boxplot([t[t.speed_kmh == s].force_relative_rms_error for s in speeds], positions=speeds,
+                widths=width, whis=(5, 95), manage_ticks=False)
+    ax3.set(xlabel="speed (km/h)", ylabel="RMS error / RMS force", yscale="log",
+            title="relative RMS force error over seeds")
+    for ax in (ax2, ax3):
+        ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(ScalarFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    handles, labels = ax1.get_legend_handles_labels()
+    more = ax2.get_legend_handles_labels()
+    fig.tight_layout()
+    _legend_below(fig, handles + more[0], labels + more[1], ncol=2)
+    return fig
+
+
+def noise_sensitivity(result):
+    """The paper's observer at the first speed, one record: relative RMS force error against the
+    sensor noise (log axes; noise 0 plotted at 1e-6)."""
+    noise = result.noise_sweep
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.loglog(noise.noise_fraction.clip(lower=1e-6) * 100, noise.force_relative_rms_error, "o-",
+              color="C1", label="paper's observer")
+    ax.axhline(0.1, color="grey", ls=":", label="10 % error")
+    ax.set(xlabel="sensor noise σ (% of channel RMS; 0 plotted at 10⁻⁴ %)",
+           ylabel="RMS force error / RMS force",
+           title=f"{noise.speed_kmh.iloc[0]:g} km/h, one record")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1))
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,165 @@
+"""Tables of chapter ``reduced-order-observer`` as the page shows them (Markdown, units in headers).
+
+Every function takes the run's named results or metrics and returns Markdown: numbers to four
+significant digits, "never" instead of the -1 of a convergence time that never happened, text in
+full (no truncation), wide tables transposed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from railpaper.data import data_path, load_quantities
+from railpaper.experiments import reduced_order_observer_evidence as evidence
+from railpaper.models import single_wheelset as sw
+
+
+def number(value, digits: int = 4) -> str:
+    """``value`` to ``digits`` significant digits (integers as they are; NaN as "—")."""
+    if isinstance(value, (bool, str)):
+        return str(value)
+    if isinstance(value, int):
+        return str(value)
+    value = float(value)
+    if math.isnan(value):
+        return "—"
+    if value == 0.0:
+        return "0"
+    text = f"{value:.{digits}g}"
+    if 1e-4 <= abs(value) < 1e6:                          # plain digits, no exponent
+        decimals = max(digits - 1 - math.floor(math.log10(abs(float(text)))), 0)
+        plain = f"{float(text):.{decimals}f}"
+        return plain.rstrip("0").rstrip(".") if "." in plain else plain
+    if "e" in text:
+        mantissa, exponent = text.split("e")
+        return f"${mantissa} \\times 10^{{{int(exponent)}}}$"
+    return text
+
+
+def seconds(value: float) -> str:
+    """A time in s, or "never" for the -1 of a convergence that did not happen."""
+    return "never" if value < 0 else number(value)
+
+
+def markdown(frame: pd.DataFrame) -> str:
+    """A DataFrame as a MyST table: header from the column names, cells as they are (strings)."""
+    def cell(text) -> str:
+        return str(text).replace("|", "\\|").replace("\n", " ")
+    lines = ["| " + " | ".join(cell(c) for c in frame.columns) + " |",
+             "|" + "---|" * len(frame.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |"
+              for row in frame.itertuples(index=False)]
+    return "\n".join(lines) + "\n"
+
+
+def parameter_table(vehicle_readings: dict[str, sw.SingleWheelset]) -> str:
+    """Table 1's parameters with units and sources, and the derived contact quantities of each
+    reading of P0 (``{reading: vehicle}``)."""
+    quantities = load_quantities(data_path("reduced-order-observer/parameters.toml"))
+    rows = [(k.replace("_", " "), number(q.value), q.unit, q.source + (f"; {q.note}" if q.note else ""))
+            for k, q in quantities.items()]
+    first = next(iter(vehicle_readings.values()))
+    rows.append(("Hertz constant G", number(first.hertz_constant_m_per_N23), "m/N^(2/3)",
+                 "Table 1 formula G = 3.86 R^(−0.115) · 10^(−8), R = 0.42 m"))
+    for reading, v in vehicle_readings.items():
+        rows.append((f"static load P0 per contact (P0 per {reading})", number(v.static_wheel_load_N),
+                     "N", f"(M_c + M_w) g / {v.contacts}"))
+        rows.append((f"contact stiffness K_r (P0 per {reading})",
+                     number(v.contact_stiffness_N_per_m), "N/m",
+                     f"{v.contacts} · 3/(2G) · P0^(1/3) (Eq. 3)"))
+    return markdown(pd.DataFrame(rows, columns=["parameter", "value", "unit", "source"]))
+
+
+def errata_table(errata: pd.DataFrame) -> str:
+    """The errata (location, printed, correction, reason), numbered E1, E2, …"""
+    frame = errata.copy()
+    frame.insert(0, "erratum", [f"E{i + 1}" for i in range(len(frame))])
+    return markdown(frame)
+
+
+def rank_table(metrics: dict) -> str:
+    """The ranks the paper quotes, per reading of P0: exact (rational arithmetic), numpy's
+    floating-point rank of the Kalman matrix (default tolerance) and the PBH rank."""
+    rows = []
+    for name, what in (("Q0", "rank Q0 = [B AB A²B A³B] (paper: 4)"),
+                       ("Q1", "rank Q1 = [C; CA; CA²; CA³] (paper: 4)"),
+                       ("reduced", "rank [A12; A12·A22] (reduced pair, needs 2)")):
+        for reading in evidence.READINGS:
+            rows.append((what, f"P0 per {reading}", metrics[f"rank_{name}_exact_{reading}"],
+                         metrics[f"rank_{name}_numpy_{reading}"],
+                         metrics[f"rank_{name}_pbh_{reading}"]))
+    return markdown(pd.DataFrame(rows, columns=["test", "reading", "exact rank",
+                                                "numpy rank (default tolerance)", "PBH rank"]))
+
+
+def speed_sweep_table(sweep: pd.DataFrame, observer_form: str) -> str:
+    """The one-record speed sweep, transposed: one column per speed."""
+    other = "foh" if observer_form == "paper" else "paper"
+    names = {"paper": "paper observer (ZOH)", "foh": "FOH observer"}
+    rows = [
+        (f"convergence time, {names[observer_form]} (s)", "convergence_time_s", seconds, 1),
+        (f"convergence time, {names[other]} (s)", f"convergence_time_s_{other}", seconds, 1),
+        ("convergence time, error equation alone (s)", "predicted_convergence_time_s", seconds, 1),
+        (f"RMS force error, {names[observer_form]} (kN)", "force_rms_error_N", number, 1e-3),
+        (f"RMS force error, {names[other]} (kN)", f"force_rms_error_N_{other}", number, 1e-3),
+        ("RMS dynamic force (kN)", "force_rms_N", number, 1e-3),
+        (f"RMS displacement error, {names[observer_form]} (µm)", "displacement_rms_error_m",
+         number, 1e6),
+        ("RMS wheelset displacement z_w (mm)", "z_w_rms_m", number, 1e3),
+        ("samples with contact lost (%)", "contact_lost_fraction", number, 100.0),
+    ]
+    table = {"quantity": [r[0] for r in rows]}
+    for _, s in sweep.iterrows():
+        table[f"{s.speed_kmh:g} km/h"] = [
+            fmt(s[col]) if fmt is seconds else fmt(s[col] * scale) for _, col, fmt, scale in rows]
+    return markdown(pd.DataFrame(table))
+
+
+#: Rows of :func:`evidence_table`: metric stem and what it is.
+EVIDENCE_ROWS = (
+    ("mc_convergence_time_s_worst", "convergence time, worse of the two speeds (s)"),
+    ("mc_displacement_relative_rms_error_worst", "RMS displacement error / RMS z_w, worse speed"),
+    ("mc_force_relative_rms_error_worst", "RMS force error / RMS force, worse speed"),
+    ("mc_trend_convergence_time_rho", "ρ(speed, convergence time)"),
+    ("mc_trend_predicted_convergence_time_rho", "ρ(speed, convergence time of the error equation)"),
+    ("mc_trend_force_rms_error_fixed_noise_rho", "ρ(speed, RMS force error), noise fixed"),
+    ("mc_trend_force_rms_error_rho", "ρ(speed, RMS force error), noise ∝ channel RMS"),
+    ("mc_trend_force_relative_rms_error_rho", "ρ(speed, RMS force error / RMS force)"),
+    ("mc_trend_force_rms_rho", "ρ(speed, RMS dynamic force)"),
+)
+
+
+def evidence_table(metrics: dict) -> str:
+    """The Monte Carlo statistics the claims read, per reading of P0: median over seeds with its
+    95 % order-statistic interval and the number of seeds."""
+    rows = []
+    for stem, what in EVIDENCE_ROWS:
+        for reading in evidence.READINGS:
+            k = f"{stem}_{reading}"
+            rows.append((what, f"P0 per {reading}", number(metrics[k]),
+                         f"[{number(metrics[k + '_low'])}, {number(metrics[k + '_high'])}]",
+                         metrics[f"{k}_n"]))
+    return markdown(pd.DataFrame(rows, columns=["statistic", "reading", "median over seeds",
+                                                "95 % interval", "seeds"]))
+
+
+def noise_table(noise_sweep: pd.DataFrame) -> str:
+    """Force and displacement errors of the paper's observer against the sensor noise."""
+    rows = [(number(r.noise_fraction * 100), number(r.force_relative_rms_error),
+             number(r.displacement_rms_error_m * 1e6)) for r in noise_sweep.itertuples()]
+    return markdown(pd.DataFrame(rows, columns=["sensor noise σ (% of channel RMS)",
+                                                "RMS force error / RMS force",
+                                                "RMS displacement error (µm)"]))
+
+
+def plant_table(plants: pd.DataFrame) -> str:
+    """Linear vs Hertz plant (noise-free, FOH observer): what linearising the contact costs."""
+    rows = [(number(r.speed_kmh), r.plant, number(r.force_rms_N / 1e3),
+             number(r.force_rms_error_N_foh_observer / 1e3),
+             number(r.force_rms_error_N_foh_observer / r.force_rms_N),
+             number(100 * r.contact_lost_fraction)) for r in plants.itertuples()]
+    return markdown(pd.DataFrame(rows, columns=[
+        "speed (km/h)", "plant", "RMS dynamic force (kN)", "RMS force error, FOH observer (kN)",
+        "RMS error / RMS force", "samples with contact lost (%)"]))
