@@ -12,6 +12,7 @@ import pytest
 from railpaper.data import read_toml
 from railpaper.experiments import partial_state_observer as ch
 from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.pipeline.claim_rules import check_row
 from railpaper.pipeline.outputs import chapter_data_dir, claims, errata_table
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -29,9 +30,11 @@ def test_spec_and_validation():
     assert ch.SPEC.notebook == "partial_state_observer.ipynb"
     quick = ch.SPEC.resolve({}, quick=True)
     assert quick["speeds_kmh"] == [60.0, 80.0, 120.0, 160.0] and quick["duration_s"] >= 2.0
+    assert quick["n_seeds"] >= 5 and ch.SPEC.resolve({})["n_seeds"] >= 20
+    assert ch.SPEC.resolve({})["suspension_reading"] == "labels"
     for bad in ({"beta": 1.0}, {"error_window_start_s": 9.0}, {"dt_s": 0.01},
                 {"wavelength_min_m": 400.0}, {"speeds_kmh": [60.0, 60.0]},
-                {"hb_zero_alpha_per_s": 20.0}):
+                {"suspension_reading": "swapped"}, {"n_seeds": 1000}):
         with pytest.raises(ParameterError):
             ch.run(quick=True, **ch.SPEC.resolve(bad, quick=True))
     with pytest.raises(ParameterError):
@@ -49,6 +52,14 @@ def test_metric_keys_and_timeseries(quick_run):
         assert f"existence_rank_{name}" in metrics and f"existence_ok_{name}" in metrics
     assert metrics["existence_ok_both"] and not metrics["existence_ok_displacements"]
     assert not metrics["existence_ok_accelerations"]
+    n = params["n_seeds"]
+    for reading in ("labels", "symbols"):           # every reading's evidence in every run
+        assert metrics[f"mc_convergence_time_s_{reading}_n"] == n
+        assert metrics[f"mc_trend_max_error_rho_{reading}_n"] == n
+        assert metrics[f"mc_converged_rate_{reading}_n"] == n * len(params["speeds_kmh"])
+        assert metrics[f"rank_Q0_pbh_{reading}"] == 20 and metrics[f"rank_L_{reading}"] == 4
+        assert metrics[f"rank_C_printed_{reading}"] == 6 and metrics[f"rank_CLt_printed_{reading}"] == 4
+    assert metrics["lmi19_printed_feasible"] is False
     ts = result.timeseries
     assert ts.columns[0] == "t_s"
     assert len(ts) == round(params["duration_s"] / params["dt_s"]) + 1
@@ -65,6 +76,8 @@ def test_independent_expectations(quick_run):
     v = result.data["context"].vehicle
     assert m["hb0_fixed_pole_per_s"] == pytest.approx(
         -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rel=1e-6)
+    assert m["hb0_fixed_pole_per_s_labels"] == pytest.approx(-2.14e6 / 4.9e4, rel=1e-6)
+    assert m["hb0_fixed_pole_per_s_symbols"] == pytest.approx(-2.535e6 / 1.96e5, rel=1e-6)
     assert m["observer_residual"] < 1e-10 and m["hb0_residual"] < 1e-10
     assert params["alpha_per_s"] <= m["observer_slowest_rate_per_s"] * (1 + 1e-5)
     assert m["observer_fastest_rate_per_s"] <= params["beta"] * params["alpha_per_s"] * (1 + 1e-5)
@@ -83,10 +96,20 @@ def test_independent_expectations(quick_run):
     mc = result.data["monte_carlo"]
     paper = mc[mc.estimator == "paper"]
     assert np.all(np.abs(paper.convergence_time_s - paper.predicted_convergence_s) < 0.015)
+    # the H B = 0 variant's error decays at −K_p/C_p: t = ln(e0 / threshold) / rate, per reading
+    for reading in ("labels", "symbols"):
+        hb0 = mc[(mc.estimator == "hb0") & (mc.reading == reading)]
+        gap = np.abs(hb0.convergence_time_s - hb0.predicted_convergence_s)
+        assert np.all(gap < 0.2 * hb0.predicted_convergence_s + 0.005)
+    # the single record is one run of the Monte Carlo: same numbers
+    own = mc[(mc.reading == "labels") & (mc.seed == params["seed"]) & (mc.estimator == "paper")]
+    for speed, lab in zip(params["speeds_kmh"], SPEEDS):
+        row = own[own.speed_kmh == speed].iloc[0]
+        assert row.max_error_after_1s_m == pytest.approx(m[f"max_error_after_1s_m_{lab}"], rel=1e-12)
 
 
 def test_deterministic():
-    params = ch.SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 1, "alpha_sweep_per_s": [20.0]},
+    params = ch.SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 2, "alpha_sweep_per_s": [20.0]},
                              quick=True)
     a, b = ch.run(quick=True, **params), ch.run(quick=True, **params)
     assert json.dumps(a.metrics, sort_keys=True) == json.dumps(b.metrics, sort_keys=True)
@@ -97,8 +120,16 @@ def test_data_files():
     errata = errata_table("partial-state-observer")
     assert list(errata.columns) == ["location", "printed", "correction", "reason"]
     assert len(errata) >= 10
-    for table in claims("partial-state-observer").values():
-        assert {"claim", "source", "metrics"} <= set(table)
+    rows = claims("partial-state-observer")
+    for key, table in rows.items():
+        check_row(key, table, "claims.toml")
+        assert "paper 000" in table["source"] and table["rule"]
+    groups = {}
+    for key, table in rows.items():                  # readings: default first, parameter named
+        groups.setdefault(table.get("group", key), []).append(table)
+    for group in groups.values():
+        if len(group) > 1 and "reading_parameter" in group[0]:
+            assert "'labels'" in group[0]["reading_parameter"]
     tol = read_toml(chapter_data_dir("partial-state-observer") / "tolerances.toml")
     assert tol["meta"]["parameters"] == "defaults"
     for mode in ("full", "quick"):
@@ -127,6 +158,6 @@ def test_notebook_quick_through_papermill(tmp_path):
     assert run["chapter"] == "partial-state-observer" and run["quick"] is True
     assert all(not (isinstance(v, float) and math.isnan(v)) for v in run["metrics"].values())
     assert _within_tolerances(run["metrics"], "quick") == []
-    for name in ("wheelset_displacement", "convergence", "max_error_vs_speed",
+    for name in ("wheelset_displacement", "convergence", "max_error_vs_speed", "speed_trends",
                  "convergence_vs_alpha", "shaping_filter_fit", "noise_free_error"):
         assert (out / f"{name}.png").stat().st_size > 10_000

@@ -233,14 +233,19 @@ class DiscreteFunctionalObserver:
         m_in = self.Gamma_now.shape[1] - y.shape[-1]
         if u is None:
             u = np.zeros(y.shape[:-1] + (m_in,))
-        v = np.concatenate([y, np.asarray(u, float)], axis=-1)
-        drive = v[..., :-1, :] @ self.Gamma_now.T + v[..., 1:, :] @ self.Gamma_next.T
-        w = np.empty(y.shape[:-1] + (self.Phi.shape[0],))
-        w[..., 0, :] = np.asarray(z0, float) - y[..., 0, :] @ self.E.T
+        v = np.concatenate([y, np.broadcast_to(np.asarray(u, float), y.shape[:-1] + (m_in,))],
+                           axis=-1)
+        lead, K, p = y.shape[:-2], y.shape[-2], self.Phi.shape[0]
+        v_t = np.moveaxis(v.reshape((-1, K, v.shape[-1])), 1, 0)          # time-major (K, B, ·)
+        drive = v_t[:-1] @ self.Gamma_now.T + v_t[1:] @ self.Gamma_next.T
+        w = np.empty((K, drive.shape[1], p))
+        w0 = np.asarray(z0, float) - y[..., 0, :] @ self.E.T
+        w[0] = np.broadcast_to(w0, lead + (p,)).reshape(-1, p)
         PhiT = self.Phi.T
-        for k in range(y.shape[-2] - 1):
-            w[..., k + 1, :] = w[..., k, :] @ PhiT + drive[..., k, :]
-        return w + y @ self.E.T
+        for k in range(K - 1):
+            np.matmul(w[k], PhiT, out=w[k + 1])
+            w[k + 1] += drive[k]
+        return np.moveaxis(w, 0, 1).reshape(lead + (K, p)) + y @ self.E.T
 
 
 def design(A: np.ndarray, B: np.ndarray, C: np.ndarray, L: np.ndarray, alpha_per_s: float,
