@@ -49,7 +49,7 @@ SPEC = ChapterSpec(
     title="Quasi-Gaussian RBPF versus RBPF for parameter estimation",
     paper="004_e1cb56090c839832.txt",
     notebook="quasi_gaussian_rbpf.ipynb",
-    quick_sizes="300 particles, 200 steps, 61x61 grid, 20 Monte Carlo records, timing up to N=1000, "
+    quick_sizes="300 particles, 200 steps, 61x61 grid, 50 Monte Carlo records, timing up to N=1000, "
                 "8 paired timing repeats",
     notebook_requires={"timing": True},
     parameters=[
@@ -78,7 +78,7 @@ SPEC = ChapterSpec(
           "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
         P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
           quick=61, minimum=3),
-        P("n_monte_carlo", 50, "int", "records (seeds) of the Monte Carlo study", quick=20,
+        P("n_monte_carlo", 100, "int", "records (seeds) of the Monte Carlo study", quick=50,
           minimum=1),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
           "Monte Carlo records are record+1, record+2, …", minimum=0),
