@@ -13,7 +13,10 @@ Definitions used for the metrics
 
 The single runs (seed ``seed``) are illustrations; the claims are decided on the Monte Carlo
 evidence of :mod:`railpaper.experiments.reduced_order_observer_evidence` (``mc_seeds`` seeds, both
-readings of P0), whose metrics ``data/reduced-order-observer/claims.toml`` reads.
+readings of P0), whose metrics ``data/reduced-order-observer/claims.toml`` reads.  On the same
+records, :mod:`railpaper.experiments.reduced_order_observer_kalman` runs a Kalman filter with a
+track shaping filter and its RTS smoother beside the paper's observer (metrics
+``force_rms_error_ratio_*`` and ``mc_force_rms_error_ratio_*``).
 """
 
 from __future__ import annotations
@@ -24,8 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from railpaper import track
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments import reduced_order_observer_evidence as evidence
+from railpaper.experiments import reduced_order_observer_kalman as kalman
 from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
 from railpaper.experiments.reduced_order_observer_record import (  # noqa: F401 (chapter API)
     ObserverRun, Record, SpeedRun, _simulate_hertz, convergence_time_s, run_observer,
@@ -153,6 +158,10 @@ class ReducedOrderObserverResult(ChapterResult):
     monte_carlo : DataFrame
         :func:`evidence.monte_carlo` samples (``mc_seeds`` seeds × speeds × readings); empty
         without ``side_tables``.
+    estimators : KalmanComparison or None
+        :func:`kalman.compare`: the paper's observer, the Kalman filter with a track shaping
+        filter and its RTS smoother on the Monte Carlo records at several noise levels; None
+        without ``side_tables``.
     """
 
     vehicle: sw.SingleWheelset | None = None
@@ -165,27 +174,61 @@ class ReducedOrderObserverResult(ChapterResult):
     noise_sweep: pd.DataFrame = field(default_factory=pd.DataFrame)
     plant_comparison: pd.DataFrame = field(default_factory=pd.DataFrame)
     monte_carlo: pd.DataFrame = field(default_factory=pd.DataFrame)
+    estimators: kalman.KalmanComparison | None = None
+
+
+def _rms(x, axis=0):
+    return np.sqrt(np.mean(x**2, axis=axis))
 
 
 def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
-    """The noise-sensitivity table (first speed) and the linear-vs-Hertz table (noise-free)."""
-    noise_rows, plant_rows = [], []
-    speed = params["speeds_kmh"][0]
-    for fraction in NOISE_SWEEP_FRACTIONS:
-        r = simulate_speed(vehicle, observers, dict(params, noise_fraction=fraction),
-                           distance_m, profile_m, speed, salt=(1,))
-        main = r.observer(params["observer_form"])
-        noise_rows.append({"noise_fraction": fraction, "speed_kmh": speed,
-                           "force_relative_rms_error": main.force_rms_error_N / r.force_rms_N,
-                           "displacement_rms_error_m": main.displacement_rms_error_m})
-    for speed in params["speeds_kmh"]:                     # cost of linearising the contact
-        for plant in ("linear", "hertz"):
-            progress(0.55, f"{plant} plant, noise-free, {speed:g} km/h")
-            r = simulate_speed(vehicle, observers, dict(params, plant=plant, noise_fraction=0.0),
-                               distance_m, profile_m, speed, salt=(2,))
-            plant_rows.append({"speed_kmh": speed, "plant": plant, "force_rms_N": r.force_rms_N,
-                               "force_rms_error_N_foh_observer": r.foh.force_rms_error_N,
-                               "contact_lost_fraction": r.contact_lost_fraction})
+    """The noise-sensitivity table (first speed, the ``observer_form`` observer at each of
+    :data:`NOISE_SWEEP_FRACTIONS`, noise draws salted 1) and the linear-vs-Hertz table
+    (noise-free sensors, FOH observer, every speed of ``speeds_kmh``, draws salted 2), each
+    simulated as one batch (one plant run per table and plant)."""
+    dt, e0, seed = params["dt_s"], params["initial_error_m"], params["seed"]
+
+    def inputs(speed, salt):
+        t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], dt,
+                                       params["duration_s"])
+        ny, nq = evidence.noise_draws(seed, speed, len(t_s), salt)
+        return t_s, q[:, 0], ny, nq
+
+    def errors(observer, y, q, q_meas, z_w, force, window):
+        x2 = np.column_stack([np.zeros(q.shape[1]), q[0] + e0])
+        z_est = evidence._observer_batch(observer, y, q_meas, x2)
+        f_est = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
+        return _rms((f_est - force)[window]), _rms((z_est - z_w)[window])
+
+    speed, fractions = params["speeds_kmh"][0], np.array(NOISE_SWEEP_FRACTIONS)
+    t_s, q, ny, nq = inputs(speed, (1,))
+    y, z_w = evidence._plant_batch(vehicle, params["plant"], dt, q[:, None])
+    force = sw.dynamic_contact_force_N(vehicle, z_w, q[:, None], params["plant"])
+    window = t_s >= params["error_window_start_s"]
+    y_meas = y + ny[:, None] * fractions[:, None] * _rms(y)               # (K, levels, 2)
+    q_meas = np.repeat((q + nq * params["track_noise_fraction"] * _rms(q))[:, None],
+                       len(fractions), axis=1)
+    force_error, z_error = errors(observers[params["observer_form"]], y_meas,
+                                  np.repeat(q[:, None], len(fractions), axis=1), q_meas,
+                                  z_w, force, window)
+    noise_rows = [{"noise_fraction": f, "speed_kmh": speed,
+                   "force_relative_rms_error": force_error[i] / _rms(force[window])[0],
+                   "displacement_rms_error_m": z_error[i]} for i, f in enumerate(fractions)]
+    speeds = params["speeds_kmh"]
+    columns = [inputs(v, (2,)) for v in speeds]
+    q = np.column_stack([c[1] for c in columns])
+    q_meas = q + np.column_stack([c[3] for c in columns]) * params["track_noise_fraction"] * _rms(q)
+    plant_rows = []
+    for plant in ("linear", "hertz"):                      # cost of linearising the contact
+        progress(0.55, f"{plant} plant, noise-free")
+        y, z_w = evidence._plant_batch(vehicle, plant, dt, q)
+        force = sw.dynamic_contact_force_N(vehicle, z_w, q, plant)
+        force_error, _ = errors(observers["foh"], y, q, q_meas, z_w, force, window)
+        lost = np.mean(force <= -vehicle.contacts * vehicle.static_wheel_load_N, axis=0)
+        plant_rows += [{"speed_kmh": v, "plant": plant, "force_rms_N": _rms(force[window])[i],
+                        "force_rms_error_N_foh_observer": force_error[i],
+                        "contact_lost_fraction": lost[i]} for i, v in enumerate(speeds)]
+    plant_rows.sort(key=lambda r: (speeds.index(r["speed_kmh"]), r["plant"] != "linear"))
     return pd.DataFrame(noise_rows), pd.DataFrame(plant_rows)
 
 
@@ -194,8 +237,9 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
 
     Single runs of seed ``seed`` (reading ``p0_basis``) give the illustrations and their metrics;
     with ``side_tables`` the run adds the side tables and the claims' evidence: the Monte Carlo
-    metrics (``mc_*``, every reading) and the deterministic structure metrics (``rank_*`` and
-    ``pole_placement_*``).
+    metrics (``mc_*``, every reading), the deterministic structure metrics (``rank_*`` and
+    ``pole_placement_*``) and the estimator comparison (:func:`kalman.compare`, reading
+    ``p0_basis``).
     ``quick`` is not read: ``params`` already hold the quick sizes.
     """
     validate(params)
@@ -228,15 +272,19 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
         columns[f"wheelset_displacement_est_m_{lab}"] = main.z_w_est_m
         columns[f"wheel_rail_force_true_N_{lab}"] = r.record.force_true_N
         columns[f"wheel_rail_force_est_N_{lab}"] = main.force_est_N
-    mc = pd.DataFrame()
+    mc, estimators = pd.DataFrame(), None
     timings = {"single_runs_s": time.perf_counter() - started}
     if params["side_tables"]:
         mc_started = time.perf_counter()
-        mc = evidence.monte_carlo(params, lambda f, m: progress(0.6 + 0.4 * f, m))
+        mc = evidence.monte_carlo(params, lambda f, m: progress(0.6 + 0.2 * f, m))
         metrics.update(evidence.legacy_band_metrics(mc, params))
         metrics.update(evidence.evidence_metrics(mc, params))
         metrics.update(evidence.structure_metrics(params))
         timings["monte_carlo_s"] = time.perf_counter() - mc_started
+        kalman_started = time.perf_counter()
+        estimators = kalman.compare(params, lambda f, m: progress(0.8 + 0.2 * f, m))
+        metrics.update(kalman.comparison_metrics(estimators, params))
+        timings["kalman_s"] = time.perf_counter() - kalman_started
     progress(1.0, "done")
     sweep = pd.DataFrame([{
         "speed_kmh": s, "convergence_time_s": runs[s].observer(form).convergence_time_s,
@@ -253,8 +301,10 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
     timings["run_s"] = time.perf_counter() - started
     return ReducedOrderObserverResult(
         metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
-        extra_tables={"speed_sweep": sweep, "monte_carlo_samples": mc}
+        extra_tables={"speed_sweep": sweep, "monte_carlo_samples": mc,
+                      "estimator_samples": estimators.samples}
         if params["side_tables"] else {"speed_sweep": sweep},
         vehicle=vehicle, A=A, B=B, observer=observer,
         error_poles_per_s=np.linalg.eigvals(observer.F), runs=runs, speed_sweep=sweep,
-        noise_sweep=noise_sweep, plant_comparison=plant_comparison, monte_carlo=mc)
+        noise_sweep=noise_sweep, plant_comparison=plant_comparison, monte_carlo=mc,
+        estimators=estimators)

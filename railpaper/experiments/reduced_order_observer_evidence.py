@@ -26,10 +26,11 @@ from __future__ import annotations
 
 from fractions import Fraction
 
+import numba
 import numpy as np
 import pandas as pd
 
-from railpaper import stats, track
+from railpaper import contact, stats, track
 from railpaper.discretise import foh
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.models import single_wheelset as sw
@@ -84,7 +85,8 @@ def _plant_batch(vehicle, plant, dt_s, q):
     """Plant response to q (K, N) from rest on q[0]: y = [ż_c, z_c] (K, N, 2) and z_w (K, N).
 
     ``plant="linear"``: exact for q linear between samples (FOH); ``"hertz"``: RK4 with four
-    substeps per sample and q linear between samples, as the chapter's single runs.
+    substeps per sample and q linear between samples, as the chapter's single runs (compiled:
+    :func:`_hertz_kernel`).
     """
     x = np.zeros((4, q.shape[1]))
     x[1] = x[3] = q[0]
@@ -97,18 +99,46 @@ def _plant_batch(vehicle, plant, dt_s, q):
             x = Phi @ x + ga * q[k] + gb * q[k + 1]
             out[k + 1] = x[[0, 1, 3]].T
         return out[..., :2], out[..., 2]
-    h, substeps = dt_s / 4, 4
-    f = lambda s, u: sw.nonlinear_derivative(vehicle, s, u)  # noqa: E731
-    for k in range(len(q) - 1):
-        for j in range(substeps):
-            qa, qm, qb = (q[k] + (q[k + 1] - q[k]) * (j + c) / substeps for c in (0.0, 0.5, 1.0))
-            k1 = f(x, qa)
-            k2 = f(x + 0.5 * h * k1, qm)
-            k3 = f(x + 0.5 * h * k2, qm)
-            k4 = f(x + h * k3, qb)
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-        out[k + 1] = x[[0, 1, 3]].T
+    G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
+    _hertz_kernel(np.ascontiguousarray(q, dtype=float), dt_s / 4, 4, np.array([
+        vehicle.car_body_mass_kg, vehicle.wheelset_mass_kg, vehicle.suspension_damping_Ns_per_m,
+        vehicle.suspension_stiffness_N_per_m, G, P0, float(vehicle.contacts),
+        contact.static_compression(P0, G)]), out)
     return out[..., :2], out[..., 2]
+
+
+@numba.njit(cache=True)
+def _hertz_derivative(x, q, c):
+    """:func:`railpaper.models.single_wheelset.nonlinear_derivative`, compiled; ``c`` = M_c, M_w,
+    C_p, K_p, G, P0, contacts, δ0."""
+    suspension = c[3] * (x[1] - x[3]) + c[2] * (x[0] - x[2])
+    delta = c[7] + x[3] - q
+    force = (max(delta, 0.0) / c[4]) ** 1.5 if delta > 0.0 else 0.0
+    dynamic_contact = c[6] * (force - c[5])
+    return np.array([-suspension / c[0], x[0], (suspension - dynamic_contact) / c[1], x[2]])
+
+
+@numba.njit(cache=True)
+def _hertz_kernel(q, h, substeps, c, out):
+    """RK4 of the Hertz plant from rest on q[0], ``substeps`` steps of h per sample, q linear
+    between samples (the operations of :func:`railpaper.experiments.reduced_order_observer_record.
+    _simulate_hertz`, per column of q); fills out[k, n] = [ż_c, z_c, z_w]."""
+    K, N = q.shape
+    for n in range(N):
+        x = np.array([0.0, q[0, n], 0.0, q[0, n]])
+        out[0, n, 0], out[0, n, 1], out[0, n, 2] = x[0], x[1], x[3]
+        for k in range(K - 1):
+            for j in range(substeps):
+                dq = q[k + 1, n] - q[k, n]
+                qa = q[k, n] + dq * (j + 0.0) / substeps
+                qm = q[k, n] + dq * (j + 0.5) / substeps
+                qb = q[k, n] + dq * (j + 1.0) / substeps
+                k1 = _hertz_derivative(x, qa, c)
+                k2 = _hertz_derivative(x + 0.5 * h * k1, qm, c)
+                k3 = _hertz_derivative(x + 0.5 * h * k2, qm, c)
+                k4 = _hertz_derivative(x + h * k3, qb, c)
+                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            out[k + 1, n, 0], out[k + 1, n, 1], out[k + 1, n, 2] = x[0], x[1], x[3]
 
 
 def _observer_batch(observer, y, q, x2_initial):
