@@ -32,9 +32,16 @@ def test_outputs_complete(quick_run_dir):
         for col in ("wheelset_displacement_true_m", "wheelset_displacement_est_m",
                     "wheel_rail_force_true_N", "wheel_rail_force_est_N"):
             assert f"{col}_{lab}" in ts.columns
-    for fig in ("wheelset_displacement", "wheel_rail_force", "trends_vs_speed", "force_error_vs_noise"):
+    for fig in ("wheelset_displacement", "wheel_rail_force", "trends_vs_speed", "force_error_vs_noise",
+                "monte_carlo_vs_speed", "force_estimates"):
         assert (out / f"{fig}.png").stat().st_size > 10_000
     assert "metrics" in json.loads((out / "timings.json").read_text())
+    samples = pd.read_csv(out / "estimator_samples.csv")
+    assert set(samples.estimator) == {"observer", "kalman", "smoother"}
+    for lab in ("60kmh", "100kmh"):
+        for est in ("kalman", "smoother"):
+            assert f"force_rms_error_ratio_{est}_{lab}" in metrics["metrics"]
+            assert f"mc_force_rms_error_ratio_{est}_{lab}_high" in metrics["metrics"]
 
 
 def test_metrics_within_tolerances(quick_run_dir):
@@ -98,8 +105,11 @@ def test_page_opens_with_reference_claims_and_rerun_box(quick_run_dir):
     cells = notebook["cells"]
     assert "".join(cells[0]["source"]).startswith(f"# {chapter.SPEC.title}\n")
     shown = _outputs(notebook, "text/markdown")
-    glued = _outputs(notebook, "application/papermill.record/text/markdown")
-    assert glued == chapter_claims(CHAPTER, out)
+    glued = [o["data"]["application/papermill.record/text/markdown"] for c in cells
+             if c["cell_type"] == "code" for o in c.get("outputs", [])
+             if o.get("metadata", {}).get("scrapbook", {}).get("name") == "claims_table"]
+    assert len(glued) == 1
+    assert "".join(glued[0]) == chapter_claims(CHAPTER, out)
     assert reference_markdown(CHAPTER) in shown and rerun_markdown(CHAPTER) in shown
     assert chapter_rules(CHAPTER) in shown and chapter_claims(CHAPTER, out) not in shown
     top = "".join("".join(c["source"]) for c in cells[:6] if c["cell_type"] == "markdown")
@@ -122,7 +132,7 @@ def test_page_has_numbered_figures_and_no_stray_output(quick_run_dir):
     notebook = json.loads((out / "reduced_order_observer.ipynb").read_text())
     markdown = "".join("".join(c["source"]) for c in notebook["cells"] if c["cell_type"] == "markdown")
     figures = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-roo-[\w-]+)", markdown)
-    assert len(figures) >= 5
+    assert len(figures) >= 6
     for name, label in figures:
         assert (out / f"{name}.png").exists()
         assert f"{{numref}}`{label}`" in markdown, label

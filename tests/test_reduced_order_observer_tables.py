@@ -75,6 +75,22 @@ def test_figures_fit_the_page(small):
     params, result = small
     for fig in (figures.displacement(result, params), figures.force(result, params, result.metrics),
                 figures.trends(result, params), figures.monte_carlo(result, params),
-                figures.noise_sensitivity(result)):
+                figures.force_error_vs_noise(result, params),
+                figures.force_estimates(result, params)):
         assert fig.get_figwidth() <= 7.0
         matplotlib.pyplot.close(fig)
+
+
+def test_closing_numbers_are_the_metrics(small):
+    params, result = small
+    m = result.metrics
+    words = tables.what_works(result, params)
+    assert words["speed_first"] == "60 km/h" and words["speed_last"] == "100 km/h"
+    k = "mc_force_rms_error_ratio_kalman_60kmh"
+    assert words["kalman_first"].startswith(tables.percent(m[k]) + " [")
+    assert tables.percent(0.000394) == "0.0394 %"
+    assert {f"track_{i}" for i in range(3)} <= set(words)
+    for name in ("observer", "kalman", "smoother"):
+        assert words[f"transient_{name}"].endswith("×")
+    text = tables.estimator_table(m, params)
+    assert "Kalman filter" in text and tables.percent(m[k]) in text

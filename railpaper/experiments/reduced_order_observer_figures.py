@@ -152,17 +152,74 @@ def monte_carlo(result, params):
     return fig
 
 
-def noise_sensitivity(result):
-    """The paper's observer at the first speed, one record: relative RMS force error against the
-    sensor noise (log axes; noise 0 plotted at 1e-6)."""
-    noise = result.noise_sweep
-    fig, ax = plt.subplots(figsize=(6, 3.6))
-    ax.loglog(noise.noise_fraction.clip(lower=1e-6) * 100, noise.force_relative_rms_error, "o-",
-              color="C1", label="paper's observer")
-    ax.axhline(0.1, color="grey", ls=":", label="10 % error")
-    ax.set(xlabel="sensor noise σ (% of channel RMS; 0 plotted at 10⁻⁴ %)",
-           ylabel="RMS force error / RMS force",
-           title=f"{noise.speed_kmh.iloc[0]:g} km/h, one record")
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1))
+#: Display style of each estimator: name, colour, marker, line style.
+ESTIMATOR_STYLES = {"observer": ("paper's observer", "C1", "o", "-"),
+                    "kalman": ("Kalman filter", "C2", "s", "-"),
+                    "smoother": ("RTS smoother (offline)", "C4", "D", "--")}
+
+
+def force_error_vs_noise(result, params):
+    """RMS force error / RMS force of each estimator against the sensor noise (top, median and
+    5–95 % band over seeds) and against the noise on the irregularity record (bottom), per speed."""
+    s = result.estimators.samples
+    speeds = params["speeds_kmh"]
+    fig, axes = plt.subplots(2, len(speeds), figsize=(7, 6), squeeze=False, sharey="row")
+    for row, (sweep, column, xlabel) in enumerate((
+            ("sensor", "noise_fraction", "sensor noise σ on $\\dot z_c$, $z_c$ (% of RMS)"),
+            ("track", "track_noise_fraction", "noise σ on the $q$ record (% of RMS of $q$)"))):
+        for ax, speed in zip(axes[row], speeds):
+            t = s[(s.sweep == sweep) & (s.speed_kmh == speed)]
+            for name, (label, colour, marker, ls) in ESTIMATOR_STYLES.items():
+                by = t[t.estimator == name].groupby(column).ratio
+                x = by.median().index.to_numpy() * 100
+                ax.fill_between(x, by.quantile(0.05), by.quantile(0.95), color=colour, alpha=0.2)
+                ax.plot(x, by.median(), marker=marker, ls=ls, color=colour, ms=5, label=label)
+            ax.axhline(1.0, color="grey", ls=":", lw=1.0, label="error = force")
+            ax.set(xscale="log", yscale="log", xlabel=xlabel,
+                   title=f"{speed:g} km/h, {t.seed.nunique()} seeds")
+        axes[row, 0].set_ylabel("RMS force error / RMS force")
+    for ax in axes[0]:
+        ax.axvline(100 * params["noise_fraction"], color="k", lw=0.8, ls="--")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    handles.append(Line2D([], [], color="k", lw=0.8, ls="--"))
+    labels.append("the run's sensor noise")
     fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=3)
+    return fig
+
+
+def force_estimates(result, params, window_s: float = 0.05, moving_rms_s: float = 0.01):
+    """One record at the run's noise, per speed: the Kalman filter's and the smoother's force
+    against the simulated one over ``window_s`` after the error window starts (left) and the
+    moving RMS of every estimator's error over the whole run, log scale (right)."""
+    speeds = params["speeds_kmh"]
+    fig, axes = plt.subplots(len(speeds), 2, figsize=(7, 2.6 * len(speeds) + 0.4), squeeze=False)
+    n = int(round(moving_rms_s / params["dt_s"]))
+    moving = lambda x: np.sqrt(np.convolve(x**2, np.ones(n) / n, mode="same"))  # noqa: E731
+    start = params["error_window_start_s"]
+    for (left, right), speed in zip(axes, speeds):
+        e = result.estimators.examples[speed]
+        shown = (e.t_s >= start) & (e.t_s <= start + window_s)
+        left.plot(e.t_s[shown], e.force_true_N[shown] / 1e3, lw=3.0, color="C0", alpha=0.5)
+        for name in ("kalman", "smoother"):
+            label, colour, marker, ls = ESTIMATOR_STYLES[name]
+            left.plot(e.t_s[shown], getattr(e, f"{name}_N")[shown] / 1e3, lw=1.0, ls=ls,
+                      color=colour)
+        left.set(title=f"{speed:g} km/h", ylabel="force (kN)")
+        right.semilogy(e.t_s, moving(e.force_true_N) / 1e3, lw=1.4, color="C0")
+        for name, (label, colour, marker, ls) in ESTIMATOR_STYLES.items():
+            right.semilogy(e.t_s, moving(getattr(e, f"{name}_N") - e.force_true_N) / 1e3,
+                           lw=0.9, ls=ls, color=colour)
+        right.axvline(start, color="grey", lw=0.8, ls=":")
+        right.set(title=f"{speed:g} km/h, {moving_rms_s * 1e3:g} ms moving RMS", ylabel="kN")
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    handles = [Line2D([], [], lw=3.0, color="C0", alpha=0.5)]
+    labels = ["simulated dynamic force"]
+    for name, (label, colour, marker, ls) in ESTIMATOR_STYLES.items():
+        handles.append(Line2D([], [], lw=1.0, ls=ls, color=colour))
+        labels.append(f"{label}: estimate (left), error (right)" if name != "observer"
+                      else f"{label}: error (right)")
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
     return fig
