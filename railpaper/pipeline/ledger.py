@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -84,16 +85,19 @@ def _show(value, unit: str = "") -> str:
 
 
 def _ours(row: dict, values: dict) -> tuple[str, object, object, object, object]:
-    """Display text and (value, low, high, n) of the row's statistic on a run."""
+    """Display text and (value, low, high, n) of the row's statistic on a run:
+    ``value [low, high] unit, n = N`` (or ``…, deterministic``)."""
     primary = row.get("primary")
     if primary is None or primary not in values:
         return ("-" if primary else "(no statistic)"), None, None, None, None
     value = values[primary]
-    text = _show(value, row.get("primary_unit", row.get("unit", "")))
+    text = _show(value)
     low = high = n = None
     if "interval" in row and all(name in values for name in row["interval"]):
         low, high = (values[name] for name in row["interval"])
         text += f" [{_show(low)}, {_show(high)}]"
+    unit = _show("", row.get("primary_unit", row.get("unit", "")))
+    text += f" {unit}" if unit else ""
     if "n_samples" in row and row["n_samples"] in values:
         n = values[row["n_samples"]]
         text += f", n = {n}"
@@ -187,6 +191,12 @@ def _cell(text: str) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ").replace("$", "\\$")
 
 
+def reader_source(source: str) -> str:
+    """Where in the paper, without our file number ("paper 001, section 3" -> "section 3"):
+    the table stands under the paper's own name."""
+    return re.sub(r"^paper \d{3}[,;:]?\s*", "", source) or source
+
+
 def verdict_badge(verdict: str) -> str:
     """Inline HTML of a verdict: icon and word in a coloured badge."""
     css = verdict.replace(" ", "-")
@@ -202,12 +212,12 @@ def summary(rows: list[LedgerRow]) -> str:
 
 def chapter_table(rows: list[LedgerRow]) -> str:
     """The MyST table of one chapter's rows: the same text in the intro and in the chapter."""
-    lines = ["| paper claim | reading | paper | ours: statistic [95 % interval], n | verdict | why |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| paper claim (where; reading) | paper | ours: statistic [95 % interval], n "
+             "| verdict | why |", "|---|---|---|---|---|"]
     for r in rows:
-        ours = r.ours + (f" — {r.statistic}" if r.statistic and r.ours not in ("-",) else "")
-        lines.append(f"| {_cell(r.claim)} ({_cell(r.source)}) | {_cell(r.reading or 'as stated')} "
-                     f"| {_cell(r.paper)} | {_cell(ours)} | {verdict_badge(r.verdict)} "
+        reading = f"; *reading: {_cell(r.reading)}*" if r.reading else ""
+        lines.append(f"| {_cell(r.claim)} ({_cell(reader_source(r.source))}{reading}) "
+                     f"| {_cell(r.paper)} | {_cell(r.ours)} | {verdict_badge(r.verdict)} "
                      f"| {_cell(r.reason)} |")
     return "\n".join(lines) + "\n"
 
@@ -242,9 +252,11 @@ def chapter_rules(chapter: str) -> str:
         what = row.get("rule") or row.get("otherwise", {}).get("reason", "")
         reading = f" — reading: {row['reading']}" if row.get("reading") else ""
         why = f" *Why:* {row['justification']}" if row.get("justification") else ""
+        ours = f" *Ours:* {row['statistic']}." if row.get("statistic") else ""
         selects = (f" (selected by `{row['reading_parameter']}`)"
                    if row.get("reading_parameter") else "")
-        lines.append(f"- **{row['claim']}**{reading}{selects}: {what}{why}".replace("\n", " "))
+        lines.append(f"- **{row['claim']}**{reading}{selects}: {what}{ours}{why}"
+                     .replace("\n", " "))
     return "\n".join(lines) + "\n"
 
 

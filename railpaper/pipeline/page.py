@@ -1,9 +1,9 @@
 """A run's own web page: ``railpaper run`` renders the executed chapter as ``DIR/index.html``.
 
-The page is the book's chapter page for this run — same theme, offline MathJax, the figures, and
-the claims section judged on this run's metrics (marked when the parameters are not the
-defaults) — built by ``jupyter-book build <notebook>`` (a one-page build) with the book's
-configuration.  MathJax is loaded from this checkout (``book/_mathjax``, a ``file://`` address)
+The page is the book's chapter page for this run — same theme, offline MathJax, the figures
+(numbered), the references, and the claims section judged on this run's metrics (marked when the
+parameters are not the defaults) — built as a small Jupyter Book whose root is the executed
+notebook, beside the book's References and Reproducibility pages, with the book's configuration.  MathJax is loaded from this checkout (``book/_mathjax``, a ``file://`` address)
 rather than copied into every run.
 """
 
@@ -23,7 +23,7 @@ def _config(title: str) -> str:
     mathjax = (BOOK_DIR / "_mathjax/node_modules/mathjax/es5/tex-chtml.js").resolve().as_uri()
     return "\n".join([
         f"title: {title!r}",
-        "only_build_toc_files: false",
+        "only_build_toc_files: true",
         "execute:",
         "  execute_notebooks: 'off'",
         "parse:",
@@ -38,6 +38,7 @@ def _config(title: str) -> str:
         f"    html_static_path: [{str((BOOK_DIR / '_static').resolve())!r}]",
         "    html_css_files: [verdicts.css]",
         "    nb_execution_mode: 'off'",
+        "    nb_render_markdown_format: 'myst'",
         "    bibtex_reference_style: author_year",
         "    suppress_warnings: ['mystnb.unknown_mime_type']",
         ""])
@@ -50,15 +51,24 @@ def render_run_page(run_dir: Path, notebook: str, title: str) -> Path | None:
     run_dir = Path(run_dir)
     work = run_dir / ".page-build"
     shutil.rmtree(work, ignore_errors=True)
-    work.mkdir()
-    config = work / "_config.yml"
-    config.write_text(_config(title))
+    source = work / "src"
+    source.mkdir(parents=True)
+    stem = Path(notebook).stem
+    shutil.copy2(run_dir / notebook, source / notebook)
+    for figure in run_dir.glob("*.png"):              # the notebook's {figure} files
+        shutil.copy2(figure, source / figure.name)
+    for page_name in ("references.md", "reproducibility.md"):
+        if (BOOK_DIR / page_name).exists():
+            shutil.copy2(BOOK_DIR / page_name, source / page_name)
+    (source / "_config.yml").write_text(_config(title))
+    (source / "_toc.yml").write_text(
+        f"format: jb-book\nroot: {stem}\nchapters:\n- file: reproducibility\n"
+        "- file: references\n")
     jupyter_book = Path(sys.executable).parent / "jupyter-book"
     result = subprocess.run(
-        [str(jupyter_book), "build", str(run_dir / notebook), "--config", str(config),
-         "--path-output", str(work)], capture_output=True, text=True, check=False)
-    stem = Path(notebook).stem
-    html = work / "_build" / "_page" / stem / "html"
+        [str(jupyter_book), "build", str(source), "--path-output", str(work)],
+        capture_output=True, text=True, check=False)
+    html = work / "_build" / "html"
     if result.returncode != 0 or not (html / f"{stem}.html").exists():
         tail = (result.stderr or result.stdout).strip().splitlines()[-1:] or ["no output"]
         print(f"railpaper: note: the run's web page could not be built ({tail[0]}); "
