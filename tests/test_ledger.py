@@ -159,7 +159,7 @@ def test_rows_need_a_documented_rule():
         chapter_rows("toy", norule, {"metrics": {"a": 1}})
     badverdict = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a",
                         "deterministic": True, "cases": [{"verdict": "reproduced*", "reason": ""}]}}
-    with pytest.raises(DataError, match="verdict in reproduced, artefact, differs, not testable"):
+    with pytest.raises(DataError, match="verdict in reproduced, artefact, differs, undecided, not"):
         chapter_rows("toy", badverdict, {"metrics": {"a": 1}})
     badtest = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "deterministic": True,
                      "cases": [{"verdict": "reproduced", "reason": "",
@@ -190,7 +190,7 @@ def test_markdown_counts_badges_and_chapter_table_shared(toy):
     assert chapter_table(rows) in text                 # the chapter renders the very same table
     assert text.count('<span class="verdict verdict-reproduced">') == 3
     assert '<span class="verdict verdict-not-testable">∅ not testable</span>' in text
-    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 1, 1, 0)))
+    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 1, 0, 1, 0)))
 
 
 def test_markdown_escapes_table_breakers():
@@ -220,7 +220,7 @@ def test_repository_claims_all_have_rules(chapter):
     claims = read_toml(chapter_data_dir(chapter) / "claims.toml")
     rows = chapter_rows(chapter, claims, {"metrics": {}, "parameters": {}, "quick": True})
     assert len(rows) == len(claims)
-    assert {r.verdict for r in rows} <= {"missing", "not testable"}
+    assert {r.verdict for r in rows} <= {"missing", "not testable", "undecided"}
     for row in claims.values():
         assert row.get("justification") or row.get("otherwise", {}).get("verdict") == "not testable"
 

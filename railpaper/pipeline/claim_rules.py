@@ -17,13 +17,15 @@ One table of a claims file is one ledger row: one claim of a paper under one rea
     interval = ["metric_low", "metric_high"]   # its 95 % interval
     n_samples = "metric_n"    # Monte Carlo samples behind it ... or: deterministic = true
     [[convergence_slower_with_speed.cases]]    # tried in order; the first whose conditions hold
-    verdict = "reproduced"    # reproduced | artefact | differs | not testable
+    verdict = "reproduced"    # reproduced | artefact | differs | undecided | not testable
     reason = "... {metric:.3g} ..."            # str.format over the run's metrics
     when = [{test = "range", metrics = ["metric_low"], above = 0}]
     [convergence_slower_with_speed.otherwise]  # no case holds (verdict "differs" unless stated)
     reason = "..."
 
-A row that cannot be tested has only ``[key.otherwise] verdict = "not testable"`` and a reason.
+A row that cannot be tested has only ``[key.otherwise] verdict = "not testable"`` and a reason;
+one whose verdict flips between disjoint seed batches at the book's sample size may state
+``verdict = "undecided"`` the same way.
 
 Condition tests (every metric of ``metrics`` must pass; the reference is ``reference`` (a metric),
 else ``value``, else the row's ``paper_value``): ``within_abs`` (|m − ref| ≤ tolerance),
@@ -38,8 +40,12 @@ import math
 
 from railpaper.data import DataError
 
-#: Verdicts a rule can give, in the order the ledger counts them.
-RULE_VERDICTS = ("reproduced", "artefact", "differs", "not testable")
+#: Verdicts a rule can give, in the order the ledger counts them.  ``undecided``: our evidence at
+#: the book's sample size cannot decide (the interval straddles the rule's threshold, or the
+#: verdict flips between disjoint seed batches); ``not testable``: the evidence needed is lost.
+RULE_VERDICTS = ("reproduced", "artefact", "differs", "undecided", "not testable")
+#: Verdicts a row may state without any case (a fixed outcome, said why in its reason).
+FIXED_VERDICTS = ("undecided", "not testable")
 TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
 ROW_KEYS = {"claim", "source", "group", "reading", "reading_parameter", "rule", "justification",
             "paper_value", "unit", "primary", "primary_unit", "statistic", "interval",
@@ -47,8 +53,9 @@ ROW_KEYS = {"claim", "source", "group", "reading", "reading_parameter", "rule", 
 
 
 def is_untestable(row: dict) -> bool:
-    """A row whose only outcome is ``not testable`` (no metric is read)."""
-    return not row.get("cases") and row.get("otherwise", {}).get("verdict") == "not testable"
+    """A row without cases whose only outcome is fixed (``not testable`` or ``undecided``):
+    no rule decides it, so no band guards it."""
+    return not row.get("cases") and row.get("otherwise", {}).get("verdict") in FIXED_VERDICTS
 
 
 def check_row(key: str, row: dict, where: str) -> None:

@@ -7,7 +7,7 @@ intro and each chapter's claims section call the same :func:`chapter_table`, so 
 disagree; ``railpaper build`` also writes ``_generated/claims_ledger.csv``.
 
 Verdicts (defined for readers in the intro): ``reproduced``, ``artefact``, ``differs``,
-``not testable``; and two states of a run rather than of a claim: ``missing`` (the chapter has
+``undecided``, ``not testable``; and two states of a run rather than of a claim: ``missing`` (the chapter has
 not been run, or its run lacks a metric the rule reads) and, for rows built from a run with
 non-default parameters, the verdict is this run's and the table says so.
 """
@@ -28,8 +28,8 @@ from railpaper.pipeline.claim_rules import (RULE_VERDICTS, check_row, is_untesta
 
 VERDICTS = RULE_VERDICTS + ("missing",)
 #: HTML of each verdict in the tables: a coloured badge with an icon (book/_static/verdicts.css).
-VERDICT_ICONS = {"reproduced": "✔", "artefact": "⚠", "differs": "✘", "not testable": "∅",
-                 "missing": "?"}
+VERDICT_ICONS = {"reproduced": "✔", "artefact": "⚠", "differs": "✘", "undecided": "?",
+                 "not testable": "∅", "missing": "–"}
 CSV_COLUMNS = ["chapter", "claim", "reading", "paper_value", "ours", "ours_low", "ours_high",
                "n_samples", "verdict", "reason"]
 
@@ -112,7 +112,7 @@ def judge(row: dict, values: dict) -> tuple[str, str]:
     ``("missing", ...)`` when a metric the rule reads is absent.
     """
     if is_untestable(row):
-        return "not testable", _format(row["otherwise"]["reason"], values)
+        return row["otherwise"]["verdict"], _format(row["otherwise"]["reason"], values)
     absent = [name for name in rule_metrics(row) if name not in values]
     if absent:
         return "missing", f"the run has no metric {absent[0]}"
