@@ -23,7 +23,14 @@ def test_band_stops_halfway_to_a_threshold_on_either_side():
 
 def test_band_reports_a_straddled_threshold_and_keeps_point_bands():
     assert "straddles the rule threshold 2" in band([1.0, 3.0], [2.0])[2]
-    assert band([20, 20, 20], [5.0])[:2] == (20, 20)
+    assert band([20, 20, 20], [5.0])[:2] == (20, 20)         # counts stay exact
+
+
+def test_float_point_bands_get_a_relative_floor_capped_at_thresholds():
+    low, high, _ = band([0.7999999999999999] * 3, [])
+    assert low < 0.8 - 5e-10 and high > 0.8 + 5e-10
+    low, high, note = band([0.7999999999999999] * 3, [0.8])
+    assert high < 0.8 and "capped" in note
 
 
 def test_compute_bands_runs_disjoint_batches_and_resumes(monkeypatch, tmp_path):

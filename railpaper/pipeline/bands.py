@@ -24,6 +24,7 @@ from railpaper.pipeline.claim_rules import rule_metrics
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 DEFAULT_STRIDE = 1000
+RELATIVE_FLOOR = 1e-9
 
 
 def rule_thresholds(chapter: str) -> dict[str, list[float]]:
@@ -50,16 +51,20 @@ def band(values: list[float], thresholds: list[float], widen: float = 0.25
          ) -> tuple[float, float, str]:
     """(low, high, note) for one metric's batch values (see the module docstring)."""
     lo, hi = min(values), max(values)
-    pad = widen * (hi - lo)
+    exact = all(float(v).is_integer() for v in values)
+    # floats get at least a relative 1e-9 either side: a statistic that every batch gives to the
+    # last bit (a rank correlation of 0.8 stored as 0.7999999999999999) may round differently on
+    # another CPU; integer-valued metrics (counts, ranks) keep exact bands
+    pad = max(widen * (hi - lo), 0.0 if exact else RELATIVE_FLOOR * max(abs(lo), abs(hi)))
     low, high, notes = lo - pad, hi + pad, []
     for t in thresholds:
-        if lo <= t <= hi and lo != hi:
+        if lo <= t <= hi and (lo != hi or t == lo):
             notes.append(f"observed range straddles the rule threshold {t:g}")
         elif t < lo and low <= t:
-            low = (lo + t) / 2
+            low = (lo + t) / 2 if (lo + t) / 2 > t else lo        # adjacent floats: no room
             notes.append(f"widening capped halfway to the threshold {t:g}")
         elif t > hi and high >= t:
-            high = (hi + t) / 2
+            high = (hi + t) / 2 if (hi + t) / 2 < t else hi
             notes.append(f"widening capped halfway to the threshold {t:g}")
     return low, high, "; ".join(dict.fromkeys(notes))
 
