@@ -73,7 +73,7 @@ def test_independent_expectations(quick_run):
     """Against theory and baselines, not against earlier output."""
     params, result = quick_run
     m = result.metrics
-    v = result.data["context"].vehicle
+    v = result.design.vehicle
     assert m["hb0_fixed_pole_per_s"] == pytest.approx(
         -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rel=1e-6)
     assert m["hb0_fixed_pole_per_s_labels"] == pytest.approx(-2.14e6 / 4.9e4, rel=1e-6)
@@ -90,10 +90,10 @@ def test_independent_expectations(quick_run):
         # the Kalman filter (optimal for its model) beats the noise-blind observer
         assert m[f"max_error_after_1s_m_{lab}_kalman"] < m[f"max_error_after_1s_m_{lab}"]
     # noise-free convergence follows the error dynamics alone: t = ln(e0/threshold)/rate
-    sweep = result.data["alpha_sweep"]
+    sweep = result.alpha_sweep
     clean = sweep[~sweep.noisy]
     assert np.all(np.abs(clean.convergence_time_s - clean.predicted_s) < 0.2 * clean.predicted_s + 0.003)
-    mc = result.data["monte_carlo"]
+    mc = result.monte_carlo
     paper = mc[mc.estimator == "paper"]
     assert np.all(np.abs(paper.convergence_time_s - paper.predicted_convergence_s) < 0.015)
     # the H B = 0 variant's error decays at −K_p/C_p: t = ln(e0 / threshold) / rate, per reading

@@ -33,12 +33,14 @@ from railpaper.discretise import foh
 from railpaper.estimators import functional_observer as fo
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments import partial_state_observer_mc as evidence
-from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
+from railpaper.experiments.base import ChapterSpec, Parameter, ParameterError
+from railpaper.experiments.partial_state_observer_result import (Estimates,
+                                                                 PartialStateObserverResult, Record)
 from railpaper.models import vertical_10dof as v10
 
 SPEC = ChapterSpec(
     name="partial-state-observer",
-    title="Partial-state observer of wheel vibration (paper 000)",
+    title="Partial-state observer of wheelset vibration (Zheng, Chai, Peng & Li 2016)",
     paper="000_2d1086b2834afcb9.txt",
     notebook="partial_state_observer.ipynb",
     quick_sizes="30 Monte Carlo seeds instead of 80; α sweep over 3 values instead of 6 "
@@ -368,7 +370,7 @@ def _runs_table(ctx: _Context, p: dict, tr: dict, est: dict, seeds, fixed) -> pd
     return pd.DataFrame(rows)
 
 
-def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
+def run(*, quick: bool = False, progress=None, **params) -> PartialStateObserverResult:
     """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`.
 
     Every seed runs every speed under both readings of Table 1 (same track, same noise
@@ -413,12 +415,14 @@ def run(*, quick: bool = False, progress=None, **params) -> ChapterResult:
             columns[f"zw{i + 1}_est_m_{_label(speed)}"] = default[speed]["paper"][:, i]
     progress(1.0, "done")
     timings["run_s"] = time.perf_counter() - started
-    data = {"context": ctx, "contexts": ctxs, "truths": truths, "estimates": default,
-            "clean": clean, "monte_carlo": mc, "alpha_sweep": sweep,
-            "existence": existence_table(ctx.model), "modal_table": v10.modal_table(ctx.model),
-            "rank_claims": rank_claims(ctx.model)}
-    return ChapterResult(metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
-                         extra_tables={"monte_carlo": mc, "alpha_sweep": sweep}, data=data)
+    return PartialStateObserverResult(
+        metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
+        extra_tables={"monte_carlo": mc, "alpha_sweep": sweep}, design=ctx, designs=ctxs,
+        records={s: Record.from_run(tr) for s, tr in truths.items()},
+        estimates={s: Estimates.from_dict(e) for s, e in default.items()},
+        noise_free={s: Estimates.from_dict(e) for s, e in clean.items()},
+        monte_carlo=mc, alpha_sweep=sweep, existence=existence_table(ctx.model),
+        modal_table=v10.modal_table(ctx.model), rank_claims=rank_claims(ctx.model))
 
 
 def _metrics(ctxs, p, truths, default, clean, mc) -> dict:
