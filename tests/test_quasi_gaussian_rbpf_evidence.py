@@ -37,6 +37,7 @@ def _table(n=25, seed=3):
         for name in ev.FILTERS + ("posterior",):
             cols[f"settling_step_{par}_{name}"] = rng.integers(1, 300, n)
             cols[f"final_error_{par}_{name}"] = rng.normal(0, 0.1, n)
+            cols[f"short_error_{par}_{name}"] = rng.normal(0, 0.2, n)
         for name in ev.FILTERS + tuple(q + ev.NO_THRESHOLD for q in ev.QGRBPF_READINGS):
             cols[f"final_z_{par}_{name}"] = rng.normal(0, 1.5, n)
         for name in ev.FILTERS:

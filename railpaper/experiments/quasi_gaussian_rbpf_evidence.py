@@ -1,9 +1,9 @@
 """Monte Carlo evidence of chapter ``quasi-gaussian-rbpf``: the statistics its claim rules read.
 
 Input is the chapter's Monte Carlo table: one row per record, with the per-record metrics of
-:func:`railpaper.experiments.quasi_gaussian_rbpf.record_metrics` (settling steps, final errors,
-final distances from the exact posterior mean in posterior standard deviations ``final_z``, final
-spread ratios).  Every statistic is a median with its distribution-free 95 % interval or a rate
+:func:`railpaper.experiments.quasi_gaussian_rbpf.record_metrics` (settling steps, final errors and
+errors at the chapter's ``short_horizon`` step, final distances from the exact posterior mean in
+posterior standard deviations ``final_z``, final spread ratios).  Every statistic is a median with its distribution-free 95 % interval or a rate
 with its Clopper–Pearson interval (:mod:`railpaper.stats`), written as ``name``, ``name_low``,
 ``name_high`` and ``name_n`` (records).  No verdict is decided here: ``data/quasi-gaussian-rbpf/
 claims.toml`` does that.
@@ -117,7 +117,8 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
     Returns
     -------
     dict
-        ``mc_settling_step_<p>_<f>`` (step), ``mc_abs_final_error_<p>_<f>`` (1),
+        ``mc_settling_step_<p>_<f>`` (step), ``mc_abs_final_error_<p>_<f>`` and
+        ``mc_abs_short_error_<p>_<f>`` (|error| at the last step and at ``short_horizon``, 1),
         ``mc_within_2std_rate_<p>_<f>``, ``mc_final_std_ratio_<p>_<f>`` (1),
         ``mc_satisfactory_rate_<f>``, ``mc_accuracy_gain_<p>_<q>`` and ``mc_accuracy_gain_ab_<q>``
         (percentage points), ``mc_settling_advantage_<q>`` (steps), ``mc_threshold_effect_<q>``
@@ -133,6 +134,8 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
                 f"mc_settling_step_{par}_{name}"))
             m.update(median_interval(np.abs(table[f"final_error_{par}_{name}"])).metrics(
                 f"mc_abs_final_error_{par}_{name}"))
+            m.update(median_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
+                f"mc_abs_short_error_{par}_{name}"))
         for name in FILTERS:
             inside = int(np.sum(np.abs(table[f"final_z_{par}_{name}"]) <= Z_SATISFACTORY))
             m.update(proportion_interval(inside, n).metrics(f"mc_within_2std_rate_{par}_{name}"))
