@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.data import data_path, load_quantities
-from railpaper.experiments.reduced_order_observer_tables import markdown, number, seconds
+from railpaper.experiments.display import markdown, number, seconds
 
 __all__ = ["markdown", "number", "seconds", "parameter_table", "modal_table", "existence_table",
            "rank_table", "observer_table", "median_table", "alpha_sweep_table"]
