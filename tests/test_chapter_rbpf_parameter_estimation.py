@@ -13,6 +13,7 @@ from railpaper.experiments import rbpf_parameter_estimation as chapter
 from railpaper.experiments.base import ParameterError, check_metrics
 from railpaper.estimators.rbpf import run_rbpf
 from railpaper.models import lateral_16state as L
+from railpaper.pipeline.claim_rules import is_untestable, rule_metrics
 
 PARAMS = ("csy", "lambda", "kpy", "ksy", "csaly")
 REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme",
@@ -34,6 +35,10 @@ def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
     metrics = check_metrics(result.metrics)
     for key in REQUIRED:
         assert key in metrics, key
+    claims = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "claims.toml")
+    for key, row in claims.items():                 # run() alone gives every metric a rule reads
+        for name in ([] if is_untestable(row) else rule_metrics(row)):
+            assert name in metrics, (key, name)
     assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
     tol = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "tolerances.toml")["quick"]
     for key, band in tol.items():
@@ -48,21 +53,38 @@ def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
 
 
 def test_toy_only_sample_is_one_record_of_the_main_run(quick_result):
-    """A Monte Carlo sample (toy_seeds=1, lateral=False, seed s) is record s of the main run."""
+    """A toy sample (toy_seeds=1, lateral=False, seed s) is record s of the main run."""
     params, result = quick_result
     seed = params["seed"] + 3
     sample = chapter.run(quick=True, **dict(params, seed=seed, toy_seeds=1, lateral=False))
     assert sample.timeseries is None
-    assert not any(k.startswith(("critical_speed", "steps_to_within", "crlb", "ekf_lateral"))
-                   for k in sample.metrics)
+    assert not any(k.startswith(("critical_speed", "steps_to_within", "crlb", "ekf_lateral",
+                                 "lateral_")) for k in sample.metrics)
     stats = result.data["toy_stats"]
     for ic in (1, 2):
         row = stats[(stats.seed == seed) & (stats.init == ic)].iloc[0]
         assert sample.metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] == row.rbpf_err_max
         assert sample.metrics[f"toy_ekf_final_abs_error_max_init{ic}"] == row.ekf_err_max
-        assert sample.metrics[f"toy_rbpf_working_error_median_init{ic}"] == \
+        assert sample.metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] == \
             row.rbpf_working_err_max
-        assert sample.metrics[f"toy_ekf_biased_fraction_init{ic}"] == float(row.ekf_biased)
+    assert sample.metrics["toy_ekf_converge_rate_init2"] == float(
+        stats[(stats.seed == seed) & (stats.init == 2)].ekf_converged.iloc[0])
+
+
+def test_monte_carlo_records_are_consecutive_seeds(quick_result):
+    """Records seed, seed + 1, ... (so seed batches k * 1000 are disjoint), each filtered from
+    both initial conditions; the lateral evidence counts n_records records."""
+    params, result = quick_result
+    stats = result.data["toy_stats"]
+    seeds = list(range(params["seed"], params["seed"] + params["toy_seeds"]))
+    assert sorted(stats[stats.init == 1].seed) == seeds == sorted(stats[stats.init == 2].seed)
+    assert len(result.data["runs"]["paper"]) == len(result.data["runs"]["working"]) == \
+        params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"]
+    assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
+    assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
+    for name in ("toy_seeds", "n_records"):
+        with pytest.raises(ParameterError, match="< 1000"):
+            chapter.run(quick=True, **chapter.SPEC.resolve({name: 1000}, quick=True))
 
 
 def test_notebook_refuses_toy_only_run(tmp_path):
@@ -103,6 +125,18 @@ def test_measurements_csv_validation(tmp_path):
     good.to_csv(tmp_path / "ok.csv", index=False)
     rec = chapter.read_measurements(str(tmp_path / "ok.csv"), params)
     assert rec["y"].shape == (20, 5) and rec["u"] is None
+
+
+def test_one_thread_restores_the_thread_counts():
+    import numba
+
+    from railpaper.experiments.rbpf_parameter_estimation_io import _openblas_handles, one_thread
+
+    before = numba.get_num_threads(), [get() for _, get in _openblas_handles()]
+    with one_thread():
+        assert numba.get_num_threads() == 1
+        assert all(get() == 1 for _, get in _openblas_handles())
+    assert (numba.get_num_threads(), [get() for _, get in _openblas_handles()]) == before
 
 
 def test_lateral_rbpf_survives_degenerate_weights():

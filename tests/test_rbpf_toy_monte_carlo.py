@@ -1,79 +1,144 @@
-"""Monte Carlo statistics of paper 003's toy (railpaper.experiments.rbpf_parameter_estimation_mc)
-against independent references: scipy's exact binomial test and counts by hand."""
+"""Monte Carlo evidence of paper 003's chapter (railpaper.experiments.rbpf_parameter_estimation_mc)
+against independent references: loops written out by hand, scipy's exact binomial test and
+scipy's t interval."""
 
 import numpy as np
 import pandas as pd
 import pytest
-from scipy.stats import binomtest
+from scipy import stats as st
 
-from railpaper.experiments import rbpf_parameter_estimation_mc as toy_mc
-
-
-@pytest.mark.parametrize("k, n", [(0, 1), (0, 48), (1, 48), (2, 48), (24, 48), (47, 48),
-                                  (48, 48), (3, 7)])
-def test_binomial_interval_is_clopper_pearson(k, n):
-    low, high = toy_mc.binomial_interval(k, n)
-    reference = binomtest(k, n).proportion_ci(confidence_level=0.95, method="exact")
-    assert low == pytest.approx(reference.low, abs=1e-12)
-    assert high == pytest.approx(reference.high, abs=1e-12)
-    if k == 0:
-        assert high == pytest.approx(1 - 0.025 ** (1 / n), rel=1e-12)   # the README's rule
+from railpaper.experiments import rbpf_parameter_estimation_mc as mc
 
 
-def test_binomial_interval_refuses_impossible_counts():
-    with pytest.raises(ValueError, match="0 <= k <= n"):
-        toy_mc.binomial_interval(5, 4)
+def _settle_by_loop(err, tol):
+    for k in range(len(err)):                       # first k with every later step inside
+        if all(e <= tol for e in err[k:]):
+            return k + 1
+    return len(err) + 1
 
 
-def _sweep(rng, n_ok=9, n_failed=2):
+@pytest.mark.parametrize("seed", range(6))
+def test_settle_step_matches_a_loop(seed):
+    rng = np.random.default_rng(seed)
+    err = np.abs(rng.normal(0, 1, 40)) * np.linspace(1, 0.1, 40)
+    if seed == 0:
+        err[-1] = np.nan                            # NaN counts as outside
+    for tol in (0.05, 0.3, 1.0, 10.0):
+        assert mc.settle_step(err, tol) == _settle_by_loop(
+            np.where(np.isnan(err), np.inf, err), tol)
+    assert mc.settle_step(np.zeros(5), 0.1) == 1
+    assert mc.settle_step(np.array([0.0, 0.0, 1.0]), 0.1) == 4     # never: K + 1
+
+
+def test_within_from_checks_every_step_from_start():
+    norm = np.ones((10, 2))
+    norm[4, 1] = 1.06                               # step 5 outside
+    assert not mc.within_from(norm, 5, 0.05)
+    assert mc.within_from(norm, 6, 0.05)
+    assert mc.within_from(norm, 5, 0.07)
+    norm[9, 0] = np.nan
+    assert not mc.within_from(norm, 6, 0.05)
+    with pytest.raises(ValueError, match="outside the record"):
+        mc.within_from(norm, 11, 0.05)
+
+
+@pytest.mark.parametrize("k, n", [(0, 20), (3, 20), (19, 20), (20, 20), (2, 6)])
+def test_rate_is_clopper_pearson(k, n):
+    hits = np.r_[np.ones(k, bool), np.zeros(n - k, bool)]
+    est = mc.rate(hits)
+    ref = st.binomtest(k, n).proportion_ci(confidence_level=0.95, method="exact")
+    assert (est.value, est.n) == (k / n, n)
+    assert est.low == pytest.approx(ref.low, abs=1e-12)
+    assert est.high == pytest.approx(ref.high, abs=1e-12)
+
+
+def test_max_abs_bias_is_bonferroni_t_by_hand():
+    rng = np.random.default_rng(3)
+    x = rng.normal([0.0, 0.08, -0.02], [0.01, 0.02, 0.05], size=(20, 3))
+    est = mc.max_abs_bias(x)
+    lows, highs = [], []
+    for col in x.T:                                 # scipy's t interval at 1 - 0.05/3
+        lo, hi = st.t.interval(1 - 0.05 / 3, len(col) - 1, loc=col.mean(), scale=st.sem(col))
+        lows.append(lo)
+        highs.append(hi)
+    lows, highs = np.array(lows), np.array(highs)
+    assert est.value == pytest.approx(np.abs(x.mean(axis=0)).max())
+    dist = np.where(lows > 0, lows, np.where(highs < 0, -highs, 0.0))
+    assert est.low == pytest.approx(dist.max())
+    assert est.high == pytest.approx(np.maximum(np.abs(lows), np.abs(highs)).max())
+    assert est.n == 20 and est.low <= est.value <= est.high
+    assert est.low > 0.05                           # column 1's bias of 8 % is resolved
+    with pytest.raises(ValueError, match="n >= 2"):
+        mc.max_abs_bias(x[:1])
+
+
+def test_max_abs_bias_covers_zero_bias_when_there_is_none():
+    x = np.random.default_rng(0).normal(0, 0.01, size=(30, 5))
+    assert mc.max_abs_bias(x).low == 0.0
+
+
+def _toy_table():
     rows = []
-    for i in range(n_ok + n_failed):
-        row = {"seed": i, "status": "ok" if i < n_ok else "error"}
-        for ic in (1, 2):
-            row[f"toy_ekf_diverged_fraction_init{ic}"] = float(rng.integers(0, 2))
-            row[f"toy_ekf_biased_fraction_init{ic}"] = float(rng.integers(0, 2))
-            row[f"toy_final_abs_error_max_rbpf_init{ic}"] = rng.lognormal()
-            row[f"toy_rbpf_working_error_median_init{ic}"] = rng.lognormal()
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def test_rates_and_metrics_count_what_they_say():
-    rng = np.random.default_rng(7)
-    sweep = _sweep(rng)
-    ok = sweep[sweep.status == "ok"]
-    toy_stats = pd.DataFrame({"init": [1, 1, 2, 2, 2], "ekf_diverged": [True, False, False, False, True],
-                              "ekf_biased": [True, True, False, False, True]})
-    rates = toy_mc.ekf_event_rates(ok, toy_stats).set_index(["init", "event", "records"])
+    ekf_conv = {1: [False, False, True, True, False], 2: [True, True, True, False, True]}
+    rbpf_conv = {1: [True, True, False, True, True], 2: [True, False, True, True, True]}
     for ic in (1, 2):
-        for event in ("diverged", "biased"):
-            hand = int(sum(ok[f"toy_ekf_{event}_fraction_init{ic}"] == 1.0))
-            main = int(toy_stats[toy_stats.init == ic][f"ekf_{event}"].sum())
-            assert rates.loc[(ic, event, "sweep"), "count"] == hand
-            assert rates.loc[(ic, event, "sweep"), "n"] == 9
-            both = rates.loc[(ic, event, "sweep + main run")]
-            assert (both["count"], both["n"]) == (hand + main, 9 + (ic == 1) * 2 + (ic == 2) * 3)
-    metrics = toy_mc.monte_carlo_metrics(sweep)
-    assert metrics["mc_failed_samples"] == 2
-    assert metrics["mc_ekf_divergence_fraction_ic2"] == rates.loc[(2, "diverged", "sweep"),
-                                                                  "fraction"]
-    errors = np.sort(ok["toy_final_abs_error_max_rbpf_init1"].to_numpy())
-    assert metrics["mc_rbpf_final_abs_error_median_ic1"] == pytest.approx(errors[4])  # 9 values
-    assert metrics["mc_rbpf_final_abs_error_p90_ic1"] == pytest.approx(
-        errors[7] + 0.2 * (errors[8] - errors[7]))                   # linear, position 7.2
+        for i in range(5):
+            rows.append(dict(seed=10 + i, init=ic, ekf_converged=ekf_conv[ic][i],
+                             ekf_diverged=ic == 1 and i == 0, rbpf_converged=rbpf_conv[ic][i],
+                             ekf_err_max=[1.0, 0.5, 0.1, 0.05, 0.3][i],
+                             rbpf_err_max=[0.1, 0.1, 0.3, 0.1, 0.1][i],
+                             ekf_settle=[501, 501, 40, 30, 501][i],
+                             rbpf_settle=[20, 30, 501, 50, 60][i]))
+    return pd.DataFrame(rows).sample(frac=1.0, random_state=1)      # order must not matter
 
 
-def test_sweep_records_follow_the_main_run():
-    seeds, sample = toy_mc.sweep_seeds_and_params({"seed": 3, "toy_seeds": 4, "mc_seeds": 5,
-                                                   "lateral": True, "n_steps": 10})
-    assert list(seeds) == [7, 8, 9, 10, 11]
-    assert sample == {"seed": 3, "toy_seeds": 1, "mc_seeds": 5, "lateral": False, "n_steps": 10}
+def test_toy_metrics_count_by_hand():
+    m = mc.toy_metrics(_toy_table())
+    assert m["toy_ekf_fail_rate_init1"] == 3 / 5 and m["toy_ekf_fail_rate_init1_n"] == 5
+    assert m["toy_ekf_blowup_rate_init1"] == 1 / 5
+    assert m["toy_ekf_converge_rate_init2"] == 4 / 5
+    assert m["toy_ekf_outcome_differs_rate"] == 4 / 5       # records 0, 1, 3, 4
+    assert m["toy_rbpf_converge_rate_init1"] == 4 / 5
+    assert m["toy_rbpf_converge_both_rate"] == 3 / 5        # records 0, 3, 4
+    gaps = sorted([0.9, 0.4, -0.2, -0.05, 0.2])
+    assert m["toy_error_gap_ekf_minus_rbpf_init1"] == pytest.approx(gaps[2])
+    assert (m["toy_error_gap_ekf_minus_rbpf_init1_low"],
+            m["toy_error_gap_ekf_minus_rbpf_init1_high"]) == pytest.approx((gaps[0], gaps[-1]))
+    assert m["toy_settle_gap_ekf_minus_rbpf_init1"] == 441   # median of 481, 471, -461, -20, 441
+    ref = st.binomtest(3, 5).proportion_ci(method="exact")
+    assert m["toy_ekf_fail_rate_init1_low"] == pytest.approx(ref.low)
 
 
-def test_no_finished_sample_is_one_clear_error():
-    sweep = _sweep(np.random.default_rng(1), n_ok=0, n_failed=3).assign(error="MemoryError: x")
-    with pytest.raises(ValueError, match="no Monte Carlo sample .* ok; first error: MemoryError"):
-        toy_mc.monte_carlo_metrics(sweep)
-    with pytest.raises(ValueError, match="no Monte Carlo sample"):
-        toy_mc.ekf_event_rates(sweep[sweep.status == "ok"], pd.DataFrame(
-            {"init": [1], "ekf_diverged": [False], "ekf_biased": [False]}))
+def test_toy_metrics_need_both_initial_conditions():
+    table = _toy_table()
+    with pytest.raises(ValueError, match="both initial conditions"):
+        mc.toy_metrics(table[~((table.init == 2) & (table.seed == 12))])
+
+
+def test_lateral_metrics_by_hand():
+    K = 400
+    runs = []
+    finals = np.array([[1.01, 0.99, 1.0, 1.02, 0.98], [1.03, 1.0, 1.0, 1.06, 1.0],
+                       [0.99, 1.0, 1.0, 1.01, 1.0]])
+    for f in finals:
+        r = np.tile(f, (K, 1))
+        r[:349] = 1.5                               # outside 5 % until step 349
+        runs.append(r)
+    runs[2][360, 4] = 0.9                           # record 2 leaves the band after step 350
+    m = mc.lateral_metrics(runs, "_x")
+    assert m["lateral_within_5pct_from_350_rate_x"] == pytest.approx(1 / 3)   # record 0 only
+    assert m["lateral_within_5pct_at_350_rate_x"] == pytest.approx(2 / 3)     # not record 1
+    assert m["lateral_within_5pct_from_350_rate_x_n"] == 3
+    assert m["lateral_bias_ksy_x"] == pytest.approx(np.mean([0.02, 0.06, 0.01]))
+    assert m["lateral_bias_max_abs_x"] == pytest.approx(np.mean([0.02, 0.06, 0.01]))
+    assert m["lateral_median_final_abs_error_max_x"] == pytest.approx(0.02)
+    lo, hi = st.t.interval(0.95, 2, loc=0.01, scale=st.sem([0.01, 0.03, -0.01]))
+    assert (m["lateral_bias_csy_x_low"], m["lateral_bias_csy_x_high"]) == pytest.approx((lo, hi))
+
+
+def test_evidence_table_rows_are_the_metrics():
+    m = {"a": 0.5, "a_low": 0.2, "a_high": 0.8, "a_n": 20, "b": 1.0, "b_low": 0.9,
+         "b_high": 1.0, "b_n": 6}
+    table = mc.evidence_table(m, {"b": "rate of b", "a": "median a"})
+    assert list(table.statistic) == ["rate of b", "median a"]
+    assert table.iloc[1][["value", "low", "high", "n"]].tolist() == [0.5, 0.2, 0.8, 20]
