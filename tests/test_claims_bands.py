@@ -32,10 +32,25 @@ def test_bands_decide_every_verdict(chapter, mode):
         verdicts = verdicts_over_bands(row, bands)
         if len(verdicts) != 1:
             problems.append(f"{key}: {mode} bands allow {sorted(verdicts)}")
-        if "n_samples" in row and bands[row["n_samples"]][0] < MIN_SAMPLES[mode]:
+        if "n_samples" in row and bands[row["n_samples"]][0] < MIN_SAMPLES[mode] \
+                and verdicts != {"undecided"}:
             problems.append(f"{key}: {mode} band of {row['n_samples']} admits fewer than "
                             f"{MIN_SAMPLES[mode]} samples")
     assert not problems, "\n".join(problems)
+
+
+def test_min_samples_gives_undecided_below_it():
+    from railpaper.pipeline.ledger import judge
+    row = {"rule": "r", "primary": "rate", "n_samples": "n", "min_samples": 100, "cases": [
+        {"verdict": "differs", "reason": "low", "when": [
+            {"test": "range", "metrics": ["rate"], "below": 0.5}]}],
+           "otherwise": {"verdict": "reproduced", "reason": "high"}}
+    assert judge(row, {"rate": 0.3, "n": 30})[0] == "undecided"
+    assert "30 samples are fewer than the 100" in judge(row, {"rate": 0.3, "n": 30})[1]
+    assert judge(row, {"rate": 0.3, "n": 100}) == ("differs", "low")
+    assert verdicts_over_bands(row, {"n": (30, 30), "rate": (0.2, 0.6)}) == {"undecided"}
+    assert verdicts_over_bands(row, {"n": (100, 100), "rate": (0.2, 0.4)}) == {"differs"}
+    assert verdicts_over_bands(row, {"n": (50, 150), "rate": (0.2, 0.4)}) == {"undecided", "differs"}
 
 
 def test_three_valued_band_logic_on_hand_cases():

@@ -44,6 +44,8 @@ def rule_thresholds(chapter: str) -> dict[str, list[float]]:
                         ts.append(ref)
                 for metric in cond.get("metrics", []):
                     out.setdefault(metric, []).extend(float(t) for t in ts)
+        if "min_samples" in row:
+            out.setdefault(row["n_samples"], []).append(row["min_samples"] - 0.5)
     return out
 
 

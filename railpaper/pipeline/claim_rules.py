@@ -16,6 +16,8 @@ One table of a claims file is one ledger row: one claim of a paper under one rea
     statistic = "median over records of ..."   # what primary is, in words
     interval = ["metric_low", "metric_high"]   # its 95 % interval
     n_samples = "metric_n"    # Monte Carlo samples behind it ... or: deterministic = true
+    min_samples = 110         # optional: fewer samples than this give "undecided" (the size at
+                              # which disjoint seed batches agree on the verdict)
     [[convergence_slower_with_speed.cases]]    # tried in order; the first whose conditions hold
     verdict = "reproduced"    # reproduced | artefact | differs | undecided | not testable
     reason = "... {metric:.3g} ..."            # str.format over the run's metrics
@@ -49,7 +51,7 @@ FIXED_VERDICTS = ("undecided", "not testable")
 TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
 ROW_KEYS = {"claim", "source", "group", "reading", "reading_parameter", "rule", "justification",
             "paper_value", "unit", "primary", "primary_unit", "statistic", "interval",
-            "n_samples", "deterministic", "metrics", "cases", "otherwise"}
+            "n_samples", "min_samples", "deterministic", "metrics", "cases", "otherwise"}
 
 
 def is_untestable(row: dict) -> bool:
@@ -82,6 +84,9 @@ def check_row(key: str, row: dict, where: str) -> None:
     if not row.get("deterministic") and "n_samples" not in row:
         fail("needs 'n_samples' (the metric counting its Monte Carlo samples) or "
              "'deterministic = true'")
+    if "min_samples" in row and ("n_samples" not in row or not isinstance(
+            row["min_samples"], int) or row["min_samples"] < 1):
+        fail("'min_samples' needs 'n_samples' and must be a positive integer")
     interval = row.get("interval")
     if interval is not None and (not isinstance(interval, list) or len(interval) != 2):
         fail("'interval' must be [low_metric, high_metric]")
@@ -141,8 +146,17 @@ def holds(cond: dict, row: dict, values: dict) -> bool:
     return all(x > 0 and ref / factor <= x <= ref * factor for x in xs)
 
 
+def too_few_samples(row: dict, n) -> str:
+    """The reason template of a row decided on fewer samples than its ``min_samples``."""
+    return (f"{n} samples are fewer than the {row['min_samples']} this rule needs: below that, "
+            "disjoint batches of seeds disagree on the verdict; this run's statistic is shown")
+
+
 def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
-    """(verdict, reason template) of the first case that holds, else the row's ``otherwise``."""
+    """(verdict, reason template) of the first case that holds, else the row's ``otherwise``;
+    ``undecided`` when the run has fewer samples than the row's ``min_samples``."""
+    if "min_samples" in row and values[row["n_samples"]] < row["min_samples"]:
+        return "undecided", too_few_samples(row, values[row["n_samples"]])
     for case in row.get("cases", []):
         if all(holds(cond, row, values) for cond in case.get("when", [])):
             return case["verdict"], case["reason"]
@@ -212,6 +226,12 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set
     One element: the bands decide the verdict, so a change that flips it fails the check.
     """
     possible = set()
+    if "min_samples" in row:
+        n_low, n_high = bands[row["n_samples"]]
+        if n_high < row["min_samples"]:
+            return {"undecided"}
+        if n_low < row["min_samples"]:
+            possible.add("undecided")
     for case in row.get("cases", []):
         state = _tri_all(holds_over_bands(c, row, bands) for c in case.get("when", []))
         if state is False:
