@@ -2,6 +2,7 @@
 
 import json
 
+import pandas as pd
 import pytest
 
 from railpaper.cli import main
@@ -27,7 +28,7 @@ def test_compare_lists_differences(tmp_path):
     m = result["metrics"].set_index("metric")
     assert m.loc["x", "B_minus_A"] == 0.5 and bool(m.loc["x", "differs"])
     assert not bool(m.loc["same", "differs"]) and bool(m.loc["only_b", "differs"])
-    assert m.loc["flag", "B_minus_A"] is None
+    assert pd.isna(m.loc["flag", "B_minus_A"])              # booleans: no difference
     assert len(result["claims"]) > 0          # every claim of the chapter, judged on each run
 
 
