@@ -41,7 +41,7 @@ from railpaper.settling import settled_index
 P = Parameter
 SPEC = ChapterSpec(
     name="rbpf-parameter-estimation",
-    title="RBPF versus EKF for suspension parameters of a high-speed vehicle",
+    title="RBPF versus EKF for suspension parameters of a high-speed train (Ding et al. 2014)",
     paper="003_106973ea68498aa8.txt",
     notebook="rbpf_parameter_estimation.ipynb",
     quick_sizes="toy as full (40 records x 500 steps, 300 particles); lateral: 5 records "
