@@ -1,0 +1,173 @@
+"""Figures of the rbpf-parameter-estimation chapter, each from a run's
+:class:`~railpaper.experiments.base.ChapterResult` and resolved parameters; 7 in wide, legends
+outside the data, display names."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from railpaper.experiments.rbpf_parameter_estimation_tables import PARAM_LABELS
+from railpaper.models.lateral_16state import PARAM_NAMES
+
+#: Display names and line styles of the three toy filters.
+TOY_FILTERS = {"rbpf": ("RBPF, paper scheme", "-"), "rbpfworking": ("RBPF, our working scheme", "--"),
+               "ekf": ("augmented EKF", ":")}
+#: Display names of the two RBPF schemes.
+SCHEMES = {"working": "our working scheme", "paper": "paper's scheme"}
+WINDOW_S = 0.35                                    # the paper's 350 steps at 1 ms
+
+
+def _legend_below(fig, ax, ncol=3):
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
+
+
+def toy_estimates(result, params):
+    """Eq. (18), one record: the estimates of x1..x4 by the three filters from both initial
+    conditions, with the true values (paper Figs 2-5)."""
+    toy, truth = result.extra_tables["toy_timeseries"], result.data["toy_truth"]
+    fig, axes = plt.subplots(2, 2, figsize=(7, 6.4), sharex=True)
+    for j, ax in enumerate(axes.flat):
+        for ic, color in ((1, "C0"), (2, "C3")):
+            for key, (label, ls) in TOY_FILTERS.items():
+                marks = dict(marker="o", ms=3, markevery=(10 * ic, 40)) if key == "ekf" else {}
+                ax.plot(toy.step, toy[f"x{j + 1}_{key}_init{ic}"], color=color, ls=ls, lw=1.2,
+                        label=f"{label}, initial condition {ic}", **marks)
+        ax.axhline(truth[j], color="k", lw=0.8, label="true value")
+        ax.set(title=f"$x_{j + 1}$ (paper Fig. {j + 2})", ylabel=f"estimate of $x_{j + 1}$ (1)")
+    for ax in axes[1]:
+        ax.set_xlabel("step n")
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
+    _legend_below(fig, axes[0, 0], ncol=2)
+    return fig
+
+
+def toy_errors(result, params):
+    """Eq. (18), every record: final max |error| per filter and initial condition (log scale),
+    and the settle steps of the EKF against the RBPF (paper scheme) from initial condition 1."""
+    st, K = result.data["toy_stats"], params["toy_steps"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(7, 3.9), gridspec_kw={"width_ratios": [1.5, 1]})
+    cols = [("rbpf_err_max", "RBPF\npaper"), ("rbpf_working_err_max", "RBPF\nours"),
+            ("ekf_err_max", "EKF")]
+    rng = np.random.default_rng(0)                                  # jitter of the dots only
+    for i, (ic, (col, _)) in enumerate((ic, c) for ic in (1, 2) for c in cols):
+        v = st[st.init == ic][col].to_numpy()
+        ax1.scatter(i + rng.uniform(-0.2, 0.2, v.size), v, s=8, color=f"C{i % 3}")
+    ax1.set_xticks(range(6), [f"{n}\ninit. {ic}" for ic in (1, 2) for _, n in cols], fontsize=8)
+    ax1.axhline(params["toy_bias_tol"], color="k", ls=":", lw=1)
+    ax1.text(5.4, params["toy_bias_tol"], " convergence\n tolerance", va="center", fontsize=8)
+    ax1.set(yscale="log", xlim=(-0.5, 6.6), ylabel="final max |error| over $x_1..x_4$ (1)",
+            title=f"{params['toy_seeds']} records of {K} steps")
+    one = st[st.init == 1]
+    ax2.scatter(one.rbpf_settle, one.ekf_settle, s=12)
+    ax2.plot([0, K + 1], [0, K + 1], color="k", lw=0.8)
+    ax2.set(xlim=(0, K + 10), ylim=(0, K + 10), xlabel="RBPF (paper scheme) settle step",
+            ylabel="EKF settle step", title=f"initial condition 1 ({K + 1} = never)")
+    fig.tight_layout()
+    return fig
+
+
+def critical_speed(result, params):
+    """Least-damped eigenvalue's real part against speed for three readings of the 'half'
+    masses, with the test speed."""
+    crit, m = result.data["critical"], result.metrics
+    names = {"chosen": "our reading (only the body halved)",
+             "all_halved": "wheelset and bogie masses halved too",
+             "wheelset_bogie_doubled": "wheelset and bogie masses doubled"}
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for key, label in names.items():
+        vc = m[f"critical_speed_kmh_{key}"]
+        ax.plot(crit.speed_kmh, crit[key],
+                label=f"{label}: " + (f"hunting from {vc:.0f} km/h" if vc > 0 else "no hunting"))
+    ax.axhline(0, color="k", lw=0.8)
+    ax.axvline(params["speed_kmh"], color="0.5", ls=":", label="test speed")
+    ax.set(xlabel="speed (km/h)", ylabel="max real part of eigenvalues (1/s)")
+    fig.tight_layout(rect=(0, 0.2, 1, 1))
+    _legend_below(fig, ax, ncol=1)
+    return fig
+
+
+def normalised_estimates(result, params):
+    """Top: one record's normalised estimates with the range over records, per scheme. Bottom:
+    every record's largest relative error (log), with the 0-0.35 s window shaded."""
+    runs, t = result.data["runs"], result.timeseries.t_s.to_numpy()
+    fig, axes = plt.subplots(2, 2, figsize=(7, 7), sharex=True, sharey="row")
+    for col, scheme in enumerate(("working", "paper")):
+        ax, ax_err = axes[0, col], axes[1, col]
+        stack = np.array(runs[scheme])                              # (records, K, 5)
+        for j, name in enumerate(PARAM_NAMES):
+            ax.plot(t, stack[0, :, j], color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
+            ax.fill_between(t, stack[:, :, j].min(0), stack[:, :, j].max(0), color=f"C{j}",
+                            alpha=0.12)
+        ax.axhspan(0.95, 1.05, color="0.8", zorder=0, label="±5 %")
+        ax.set_title(f"{SCHEMES[scheme]}:\nrecord {params['seed']}, range of {len(stack)}")
+        worst = np.abs(stack - 1).max(axis=2)                       # (records, K)
+        ax_err.semilogy(t, worst.T, color="C3" if scheme == "paper" else "C2", lw=0.6, alpha=0.6)
+        ax_err.axhline(0.05, color="k", lw=1, label="5 %")
+        ax_err.set(xlabel="time (s)", title=f"{SCHEMES[scheme]}: every record")
+        for a in (ax, ax_err):
+            a.axvspan(0, WINDOW_S, color="0.93", zorder=0)
+            a.axvline(WINDOW_S, color="k", ls=":", lw=1)
+    axes[0, 0].set_ylabel("estimate / true value (1)")
+    axes[1, 0].set_ylabel("max over θ of |θ̂/θ − 1| (1)")
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    _legend_below(fig, axes[0, 0], ncol=6)
+    return fig
+
+
+def relative_errors(result, params):
+    """One record (working scheme): |estimate/true - 1| per parameter (log) with the CRLB std
+    after 350 steps (dotted) where the true values are known."""
+    m, t, main = result.metrics, result.timeseries.t_s.to_numpy(), result.data["runs"]["working"][0]
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for j, name in enumerate(PARAM_NAMES):
+        ax.plot(t, np.abs(main[:, j] - 1), color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
+        if "crlb" in result.data:
+            ax.axhline(m[f"crlb_rel_350_{name}"], color=f"C{j}", ls=":", lw=1)
+    ax.axhline(0.05, color="k", lw=1, label="5 %")
+    ax.axvline(WINDOW_S, color="k", ls=":", lw=1)
+    ax.set(yscale="log", xlabel="time (s)", ylabel="|estimate / true − 1| (1)")
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    _legend_below(fig, ax, ncol=6)
+    return fig
+
+
+def final_errors_over_records(result, params):
+    """Every record's final relative error per parameter (dots) and the mean with its 95 % t
+    interval (bars), per scheme."""
+    m, runs = result.metrics, result.data["runs"]
+    fig, axes = plt.subplots(1, 2, figsize=(7, 3.8), sharey=True)
+    for ax, (scheme, suffix) in zip(axes, (("paper", "_paper_scheme"),
+                                           ("working", "_working_scheme"))):
+        finals = np.array([r[-1] - 1 for r in runs[scheme]])
+        for j, name in enumerate(PARAM_NAMES):
+            ax.scatter(np.full(len(finals), j) + np.linspace(-0.2, 0.2, len(finals)),
+                       finals[:, j], s=9, color=f"C{j}", alpha=0.7)
+            mean, lo, hi = (m[f"lateral_bias_{name}{suffix}{s}"] for s in ("", "_low", "_high"))
+            ax.errorbar(j + 0.3, mean, [[mean - lo], [hi - mean]], fmt="o", ms=4, color="k",
+                        capsize=3)
+        ax.axhspan(-0.05, 0.05, color="0.88", zorder=0)
+        ax.set_xticks(range(5), [PARAM_LABELS[n] for n in PARAM_NAMES])
+        ax.set_title(f"{SCHEMES[scheme]}: {len(finals)} records")
+    axes[0].set_ylabel("final θ̂/θ − 1 (1)")
+    fig.tight_layout()
+    return fig
+
+
+def ekf_lateral(result, params):
+    """The augmented EKF on one record from every initial guess: normalised estimates."""
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    for i, r in enumerate(result.data.get("ekf", [])):
+        for j, name in enumerate(PARAM_NAMES):
+            ax.plot(np.arange(1, len(r) + 1) * params["dt_s"], r[:, j], color=f"C{j}", lw=0.7,
+                    label=PARAM_LABELS[name] if i == 0 else None)
+    ax.axhspan(0.95, 1.05, color="0.8", zorder=0, label="±5 %")
+    ax.set(xlabel="time (s)", ylabel="estimate / true value (1)")
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    _legend_below(fig, ax, ncol=6)
+    return fig
+
+
+__all__ = ["critical_speed", "ekf_lateral", "final_errors_over_records", "normalised_estimates",
+           "relative_errors", "toy_errors", "toy_estimates"]
