@@ -114,7 +114,7 @@ MATRIX = [
                               "--out", "{OUT}"], 2, ["unknown spectrum 'german-lo'", "german-low"]),
     ("run-track-class", ["run", PSO, "-p", "track_class", "7", "--out", "{OUT}"], 2,
      ["'track_class' must be 1..6"]),
-    ("run-window-after-end", ["run", PSO, "--quick", "-p", "error_window_start_s", "5",
+    ("run-window-after-end", ["run", PSO, "--quick", "-p", "error_window_start_s", "12",
                               "--out", "{OUT}"], 2, ["'error_window_start_s'", "duration_s"]),
     ("run-prior-box", ["run", QG, "-p", "a_true", "0.9", "--out", "{OUT}"], 2,
      ["a_true=0.9", "prior box"]),

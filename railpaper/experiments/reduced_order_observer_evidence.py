@@ -284,6 +284,8 @@ def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
                              ("force_rms_N", "force_rms"), ("force_rms_error_N", "force_rms_error"),
                              ("force_rms_error_N_fixed_noise", "force_rms_error_fixed_noise"),
                              ("force_relative_rms_error", "force_relative_rms_error")):
+            if len(speeds) < 2:             # a run at one speed has no trend with speed
+                continue                    # (its trend claims show as missing)
             values = _per_seed(t, column, speeds)
             metrics.update(stats.paired_trend(values).metrics(f"mc_trend_{name}_rho_{reading}"))
             if column.startswith("force"):                  # effect size of the force trends

@@ -101,6 +101,8 @@ def evidence_table(metrics: dict) -> str:
     for stem, what in EVIDENCE_ROWS:
         for reading in evidence.READINGS:
             k = f"{stem}_{reading}"
+            if k not in metrics:                  # trends need at least two speeds
+                continue
             rows.append((what, f"P0 per {reading}", number(metrics[k]),
                          f"[{number(metrics[k + '_low'])}, {number(metrics[k + '_high'])}]",
                          metrics[f"{k}_n"]))
