@@ -49,7 +49,7 @@ SPEC = ChapterSpec(
     title="Quasi-Gaussian RBPF versus RBPF for parameter estimation",
     paper="004_e1cb56090c839832.txt",
     notebook="quasi_gaussian_rbpf.ipynb",
-    quick_sizes="300 particles, 200 steps, 61x61 grid, 50 Monte Carlo records, timing up to N=1000, "
+    quick_sizes="500 particles, 200 steps, 61x61 grid, 50 Monte Carlo records, timing up to N=1000, "
                 "8 paired timing repeats",
     notebook_requires={"timing": True},
     parameters=[
@@ -60,7 +60,7 @@ SPEC = ChapterSpec(
           positive=True),
         P("p0_std", 0.05, "float", "initial state standard deviation (P0 = p0_std^2 I), 1",
           positive=True),
-        P("n_particles", 1000, "int", "particles of every filter", quick=300, minimum=2),
+        P("n_particles", 1000, "int", "particles of every filter", quick=500, minimum=2),
         P("n_steps", 300, "int", "measurements per record", quick=200, minimum=2),
         P("a_min", -1.0, "float", "lower bound of the uniform prior on a, 1"),
         P("a_max", 0.4, "float", "upper bound of the uniform prior on a, 1"),
