@@ -46,7 +46,7 @@ from railpaper.settling import settled_index
 P = Parameter
 SPEC = ChapterSpec(
     name="quasi-gaussian-rbpf",
-    title="Quasi-Gaussian RBPF versus RBPF for parameter estimation",
+    title="Quasi-Gaussian RBPF versus RBPF for railway-vehicle parameters (authors lost in OCR)",
     paper="004_e1cb56090c839832.txt",
     notebook="quasi_gaussian_rbpf.ipynb",
     quick_sizes="500 particles, 200 steps, 61x61 grid, 50 Monte Carlo records, timing up to N=1000, "

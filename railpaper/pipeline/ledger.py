@@ -100,6 +100,7 @@ def _ours(row: dict, values: dict) -> tuple[str, object, object, object, object]
     text += f" {unit}" if unit else ""
     if "n_samples" in row and row["n_samples"] in values:
         n = values[row["n_samples"]]
+        n = int(n) if isinstance(n, float) and n.is_integer() else n     # timings.json: floats
         text += f", n = {n}"
     elif row.get("deterministic"):
         text += ", deterministic"
