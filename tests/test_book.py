@@ -50,6 +50,8 @@ def test_chapter_page_has_figures_and_typeset_math(built_book, chapter, tmp_path
     assert page.exists()
     dom, errors = rendered_dom(page, tmp_path / "profile")
     assert not errors, f"uncaught errors in {page.name}: {errors}"
+    for stray in ("PosixPath(", "dtype: ", "&lt;Figure size", "<Figure size"):
+        assert stray not in page.read_text(), f"{page.name} shows {stray!r} output"
     # MathJax 3 (served from _static, no network) replaced the TeX by mjx-container elements
     assert dom.count("<mjx-container") >= 3, "math was not typeset"
     assert "math display" not in dom or "<mjx-container" in dom
