@@ -317,7 +317,8 @@ omegas = arrays(np.float64, st.integers(2, 30), elements=st.floats(1e-3, 50.0), 
 def test_rational_psd_positive_and_decreasing(omega, spectrum, component):
     omega = np.sort(omega)
     s = track.psd(spectrum, component, omega)
-    assert np.all(s > 0) and np.all(np.diff(s) < 0)
+    apart = np.diff(omega) > 1e-9 * omega[1:]        # distinct floats a few ulps apart give equal s
+    assert np.all(s > 0) and np.all(np.diff(s) <= 0) and np.all(np.diff(s)[apart] < 0)
 
 
 @settings(max_examples=40, deadline=None)
