@@ -34,6 +34,7 @@ from railpaper.estimators import functional_observer as fo
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments import partial_state_observer_mc as evidence
 from railpaper.experiments.base import ChapterSpec, Parameter, ParameterError
+from railpaper.experiments.track_shaping import shaping_filter
 from railpaper.experiments.partial_state_observer_result import (Estimates,
                                                                  PartialStateObserverResult, Record)
 from railpaper.models import vertical_10dof as v10
@@ -119,18 +120,6 @@ def validate(p: dict) -> None:
 
 def _label(speed_kmh: float) -> str:
     return f"{speed_kmh:g}kmh"
-
-
-def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float]):
-    """Second-order shaping filter fitted to the spectrum at speed V: ``S_t(ω) = S(ω/V)/V``.
-
-    Returns the filter and the fitted (ω, S_t) samples (log-spaced over the band).
-    """
-    omega_m = np.logspace(np.log10(2 * np.pi / band_m[1]), np.log10(2 * np.pi / band_m[0]), 200)
-    omega_t = omega_m * speed_mps
-    S_t = track.psd(spectrum, "vertical", omega_m) / speed_mps
-    variance = track.band_variance(spectrum, "vertical", *band_m)
-    return kb.fit_shaping_filter(omega_t, S_t, variance), omega_t, S_t
 
 
 def convergence_time_s(t_s: np.ndarray, error: np.ndarray, threshold: np.ndarray) -> float:

@@ -43,6 +43,7 @@ from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments import reduced_order_observer_evidence as evidence
+from railpaper.experiments import track_shaping
 from railpaper.models import single_wheelset as sw
 
 #: Sensor-noise levels (σ / channel RMS) of the comparison; the run's ``noise_fraction`` is added.
@@ -70,12 +71,7 @@ def shaping_filter(track_class: int, speed_mps: float) -> kb.ShapingFilter:
     The temporal one-sided PSD is ``S(Ω = ω/V)/V`` over the profile's wavelength band
     (:data:`evidence.FRA_BAND_M`), with the band's variance as a constraint.
     """
-    spectrum = f"fra-{track_class}"
-    band = evidence.FRA_BAND_M
-    omega_m = np.logspace(np.log10(2 * np.pi / band[1]), np.log10(2 * np.pi / band[0]), 200)
-    return kb.fit_shaping_filter(omega_m * speed_mps,
-                                 track.psd(spectrum, "vertical", omega_m) / speed_mps,
-                                 track.band_variance(spectrum, "vertical", *band))
+    return track_shaping.shaping_filter(f"fra-{track_class}", speed_mps, evidence.FRA_BAND_M)[0]
 
 
 @dataclass(frozen=True)
