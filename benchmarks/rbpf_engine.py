@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from railpaper.estimators.kalman import LinearGaussianBatch
+from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF
 from railpaper.experiments import rbpf_parameter_estimation as E

@@ -5,7 +5,8 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.stats import multivariate_normal
 
-from railpaper.estimators.kalman import LinearGaussianBatch, gaussian_logpdf, innovation, predict, update
+from railpaper.estimators.kalman import gaussian_logpdf, innovation, predict, update
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 
 def random_spd(rng, n, batch=()):

@@ -10,7 +10,8 @@ from scipy.linalg import expm
 
 from railpaper.batch_expm import expm_stack, zoh_stack
 from railpaper.discretise import zoh
-from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.kalman import predict, update
+from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.kalman_bank import kalman_run, kalman_step
 from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_rbpf
 from railpaper.models import lateral_16state as L

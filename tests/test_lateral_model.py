@@ -7,7 +7,7 @@ from scipy.linalg import expm
 
 from railpaper.data import DATA_DIR, load_quantities
 from railpaper.estimators.crlb import crlb_std, fisher_information
-from railpaper.estimators.kalman import LinearGaussianBatch
+from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.rbpf import run_rbpf
 from railpaper.models import lateral_16state as L
 

@@ -17,7 +17,8 @@ from typing import Callable
 
 import numpy as np
 
-from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.kalman import predict, update
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 
 def innovations(system: Callable[[np.ndarray], LinearGaussianBatch], theta: np.ndarray,

@@ -195,35 +195,3 @@ def _positive_definite_or_identity(S: np.ndarray) -> tuple[np.ndarray, np.ndarra
     safe = np.where(bad[:, None, None], np.eye(S.shape[-1]), stack).reshape(S.shape)
     return safe, bad.reshape(S.shape[:-2])
 
-
-class LinearGaussianBatch:
-    """Matrices of N linear-Gaussian models (one per particle or grid point), or of one model.
-
-    ``x_k = F x_{k-1} + B u_k + noise(Q)``, ``y_k = H x_k + noise(R)``.  Each matrix is either
-    shared (2-D) or per model (3-D with leading axis N).
-
-    Attributes
-    ----------
-    F : ndarray, (n, n) or (N, n, n)
-    Q : ndarray, (n, n) or (N, n, n)
-        Process-noise covariance in state coordinates (``G Q_w Gᵀ``).
-    H : ndarray, (p, n) or (N, p, n)
-    R : ndarray, (p, p) or (N, p, p)
-    B : ndarray, (n, m) or (N, n, m), optional
-    """
-
-    __slots__ = ("F", "Q", "H", "R", "B")
-
-    def __init__(self, F, Q, H, R, B=None):
-        self.F = np.asarray(F, float)
-        self.Q = np.asarray(Q, float)
-        self.H = np.asarray(H, float)
-        self.R = np.asarray(R, float)
-        self.B = None if B is None else np.asarray(B, float)
-
-    def take(self, indices: np.ndarray) -> "LinearGaussianBatch":
-        """The models at ``indices`` (shared matrices stay shared)."""
-        def pick(M):
-            return M if M is None or M.ndim < 3 else M[indices]
-        return LinearGaussianBatch(pick(self.F), pick(self.Q), pick(self.H), pick(self.R),
-                                   pick(self.B))

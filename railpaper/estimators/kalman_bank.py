@@ -33,7 +33,8 @@ import numba
 import numpy as np
 
 from railpaper.batch_expm import stack_matmul
-from railpaper.estimators.kalman import LOG_2PI, LinearGaussianBatch
+from railpaper.estimators.kalman import LOG_2PI
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
 

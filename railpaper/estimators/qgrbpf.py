@@ -44,12 +44,13 @@ from typing import Callable
 
 import numpy as np
 
-from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.kalman import predict, update
 from railpaper.estimators.particles import (effective_sample_size, gaussian_draws,
                                             gaussian_log_density, multinomial_search_resample,
                                             normalise_log_weights, weighted_mean_cov)
 from railpaper.estimators.rbpf import (ENGINES, FilterRun, bank_step, initial_bank,
                                        mixture_moments, run_filter)
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 WEIGHTINGS = ("ratio", "printed")
 

@@ -2,7 +2,7 @@
 
 Particles carry parameter vectors θ_i (N, d); each particle carries its own Kalman filter for
 the linear state, run with the matrices ``system(θ_i)``.  The model is a callable
-``system(theta (N, d)) -> LinearGaussianBatch`` (see :mod:`railpaper.estimators.kalman`), so the
+``system(theta (N, d)) -> LinearGaussianBatch`` (see :mod:`railpaper.linear_gaussian`), so the
 same engine serves paper 004's toy, paper 003's Eq. (18) toy and paper 003's lateral vehicle
 model (where ``system`` discretises A(θ) per particle).  ``system`` is called only when θ
 changes; resampling reuses the matrices by index.
@@ -34,11 +34,12 @@ from typing import Callable
 
 import numpy as np
 
-from railpaper.estimators.kalman import LinearGaussianBatch, predict, update
+from railpaper.estimators.kalman import predict, update
 from railpaper.estimators.kalman_bank import kalman_run, kalman_step
 from railpaper.estimators.particles import (effective_sample_size, liu_west_move,
                                             normalise_log_weights, systematic_resample,
                                             weighted_mean_cov)
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 SCHEMES = ("paper", "working")
 ENGINES = ("compiled", "numpy")

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from railpaper.batch_expm import zoh_stack
-from railpaper.estimators.kalman import LinearGaussianBatch
+from railpaper.linear_gaussian import LinearGaussianBatch
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
                "vyb", "yb", "vpsib", "psib", "vybd", "ybd", "d1", "d2")
