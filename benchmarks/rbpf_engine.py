@@ -151,8 +151,8 @@ def _peak_rss_mb(N: int, n_steps: int) -> float:
             "status = open('/proc/self/status').read().split('VmHWM:')[1]\n"
             "print(int(status.split()[0]) / 1024)\n")
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+    # ``python -c`` puts its working directory (the checkout) first on the child's path
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=root)
     return float(out.stdout.split()[-1])
 

@@ -38,3 +38,15 @@ def test_busy_machine_is_flagged_quiet_is_not():
 def test_table_has_every_row():
     assert format_markdown(payload()).count("| lateral") == 0
     assert format_markdown(payload()).count("| compiled |") == 3
+
+
+def test_benchmarks_load_by_file_path_without_touching_sys_path():
+    import sys
+
+    from railpaper.pipeline.bench import _load_benchmarks
+    before = list(sys.path)
+    engine = _load_benchmarks()
+    assert sys.path == before
+    assert engine.__file__.endswith("benchmarks/rbpf_engine.py")
+    assert engine.FilterpyRBPF.__module__ == "benchmarks.filterpy_rbpf"
+    assert _load_benchmarks() is engine

@@ -108,3 +108,22 @@ def test_a_planted_violation_is_found(tmp_path, where, source):
     assert violations(pkg) == []
     (pkg / where).write_text(source)
     assert len(violations(pkg)) == 1
+
+
+def sys_path_uses(package_dir: Path) -> list[str]:
+    """Every ``sys.path`` expression in the package's source (file:line)."""
+    found = []
+    for path in sorted(package_dir.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if (isinstance(node, ast.Attribute) and node.attr == "path"
+                    and isinstance(node.value, ast.Name) and node.value.id == "sys"):
+                found.append(f"{path.relative_to(package_dir.parent)}:{node.lineno}")
+    return found
+
+
+def test_the_package_never_touches_sys_path(tmp_path):
+    assert sys_path_uses(PACKAGE) == []
+    planted = tmp_path / "railpaper"
+    planted.mkdir()
+    (planted / "bench.py").write_text("import sys\n\ndef f():\n    sys.path.insert(0, '.')\n")
+    assert sys_path_uses(planted) == ["railpaper/bench.py:4"]

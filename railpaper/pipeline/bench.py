@@ -5,6 +5,8 @@ Benchmarks are measurements, not tests: nothing here asserts a speed.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -15,12 +17,26 @@ REAL_TIME_STEPS_PER_S = 1000.0          # paper 003's lateral model is sampled a
 
 
 def _load_benchmarks():
-    if not (REPO_DIR / "benchmarks" / "rbpf_engine.py").exists():
+    """``benchmarks.rbpf_engine`` of this checkout, loaded from its file path.
+
+    ``benchmarks/`` is not on ``sys.path`` (and ``sys.path`` is not edited): the package is
+    registered in ``sys.modules`` from ``benchmarks/__init__.py`` with its directory as the
+    package path, so its modules import each other as ``benchmarks.*``.
+    """
+    root = REPO_DIR / "benchmarks"
+    if not (root / "rbpf_engine.py").exists():
         raise PipelineError(f"benchmarks/ not found in {REPO_DIR} (bench runs from a checkout)")
-    if str(REPO_DIR) not in sys.path:
-        sys.path.insert(0, str(REPO_DIR))
-    from benchmarks import rbpf_engine
-    return rbpf_engine
+    loaded = sys.modules.get("benchmarks")
+    if loaded is None:
+        spec = importlib.util.spec_from_file_location(
+            "benchmarks", root / "__init__.py", submodule_search_locations=[str(root)])
+        package = importlib.util.module_from_spec(spec)
+        sys.modules["benchmarks"] = package
+        spec.loader.exec_module(package)
+    elif [Path(p).resolve() for p in getattr(loaded, "__path__", [])] != [root.resolve()]:
+        raise PipelineError(f"another module named 'benchmarks' is already imported "
+                            f"({getattr(loaded, '__file__', loaded)}), not {root}")
+    return importlib.import_module("benchmarks.rbpf_engine")
 
 
 def format_table(payload: dict) -> str:
