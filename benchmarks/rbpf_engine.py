@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from railpaper.discretise import zoh
 from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF
@@ -44,7 +45,7 @@ def lateral_problem(n_steps: int, seed: int = 0) -> dict:
 
     def textbook(th):                          # stacked scipy expm: the straightforward path
         A = L.a_of_theta(A0, Ak, th)
-        F, G = L.zoh_batch(A, L.input_matrix(), p["dt_s"])
+        F, G = zoh(A, L.input_matrix(), p["dt_s"])
         return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
 
     return dict(p=p, theta=theta, y=data["y"], u=data["u"], Q=Q, R=R, A0=A0, Ak=Ak,

@@ -91,7 +91,7 @@ def test_expm_stack_matches_scipy_on_the_lateral_model_and_random_matrices(later
     A0, Ak = L.affine_terms(fixed, v)
     A = L.a_of_theta(A0, Ak, theta * rng.uniform(0.5, 1.7, (70, 5)))
     F, G = zoh_stack(A, L.input_matrix(), dt)
-    Fr, Gr = L.zoh_batch(A, L.input_matrix(), dt)
+    Fr, Gr = zoh(A, L.input_matrix(), dt)          # scipy expm, stacked
     assert rel(F, Fr) < 1e-12 and rel(G, Gr) < 1e-12
     for norm in (0.01, 1.0, 30.0):                  # no squaring ... several squarings
         M = rng.standard_normal((9, 7, 7))

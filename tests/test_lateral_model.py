@@ -6,6 +6,7 @@ from filterpy.kalman import KalmanFilter
 from scipy.linalg import expm
 
 from railpaper.data import DATA_DIR, load_quantities
+from railpaper.discretise import zoh
 from railpaper.estimators.crlb import crlb_std, fisher_information
 from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.rbpf import run_rbpf
@@ -41,15 +42,15 @@ def test_equations_by_hand():
     assert np.sum(np.abs(ev) < 1e-6) == 2
 
 
-def test_zoh_batch_matches_scipy_and_stable_at_300():
+def test_zoh_matches_scipy_and_stable_at_300():
     A = L.build_A_direct(FIXED, THETA, V)
     B = L.input_matrix()
-    F, G = L.zoh_batch(A[None], B, 1e-3)
+    F, G = zoh(A, B, 1e-3)
     M = np.zeros((18, 18))
     M[:16, :16], M[:16, 16:] = A, B
     E = expm(M * 1e-3)
-    np.testing.assert_allclose(F[0], E[:16, :16], atol=1e-13)
-    np.testing.assert_allclose(G[0], E[:16, 16:], atol=1e-13)
+    np.testing.assert_allclose(F, E[:16, :16], atol=1e-13)
+    np.testing.assert_allclose(G, E[:16, 16:], atol=1e-13)
     assert L.least_damped(A)[0] < 0
 
 

@@ -27,6 +27,7 @@ import pandas as pd
 
 from railpaper import track
 from railpaper.data import DATA_DIR, load_quantities
+from railpaper.discretise import zoh
 from railpaper.estimators.crlb import crlb_std, fisher_information
 from railpaper.estimators.ekf import run_augmented_ekf
 from railpaper.estimators.rbpf import run_rbpf
@@ -156,9 +157,8 @@ def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> dict
 
 def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
     """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
-    _, G = L.zoh_batch(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6)[None],
-                       L.input_matrix(), p["dt_s"])
-    Q = G[0] @ np.diag(input_var) @ G[0].T + 1e-14 * np.eye(L.N_STATES)
+    _, G = zoh(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6), L.input_matrix(), p["dt_s"])
+    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
     return Q, np.diag(noise_std(p) ** 2)
 
 

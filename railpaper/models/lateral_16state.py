@@ -25,6 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from railpaper.batch_expm import zoh_stack
+from railpaper.discretise import zoh
 from railpaper.linear_gaussian import LinearGaussianBatch
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
@@ -145,23 +146,12 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
     return re, float(v0 + (v1 - v0) * (-r0) / (r1 - r0))
 
 
-def zoh_batch(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact ZOH ``(e^{A dt}, ∫ e^{As} ds B)`` of a stack A (N, n, n), one batched expm."""
-    A = np.atleast_3d(A) if A.ndim == 2 else A
-    N, n = A.shape[0], A.shape[-1]
-    m = B.shape[-1]
-    M = np.zeros((N, n + m, n + m))
-    M[:, :n, :n] = A * dt_s
-    M[:, :n, n:] = B * dt_s
-    E = expm(M)
-    return E[:, :n, :n], E[:, :n, n:]
-
-
 def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
     The ZOH is the compiled balanced Taylor :func:`railpaper.batch_expm.zoh_stack` (≈ 1e-15
-    relative to :func:`zoh_batch`'s scipy ``expm``, ≈ 50× faster on 1000 particles).
+    relative to :func:`railpaper.discretise.zoh`'s scipy ``expm``, ≈ 50× faster on 1000
+    particles; ``tests/test_kalman_bank.py`` checks the two agree).
     """
     A0, Ak = affine_terms(fixed, speed_mps)
     B = input_matrix()
@@ -178,8 +168,7 @@ def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fin
                    ) -> np.ndarray:
     """States on the fine grid (K+1, 16) from rest, ZOH of the fine input u_fine (K, 2)."""
     A = build_A_direct(fixed, theta, speed_mps)
-    F, G = zoh_batch(A[None], input_matrix(), dt_fine_s)
-    F, G = F[0], G[0]
+    F, G = zoh(A, input_matrix(), dt_fine_s)
     x = np.zeros((len(u_fine) + 1, N_STATES))
     drive = u_fine @ G.T
     for k in range(len(u_fine)):
