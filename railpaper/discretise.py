@@ -2,6 +2,14 @@
 
 All functions work on the last two axes, so a stack of systems ``A`` of shape ``(..., n, n)``
 is discretised in one call.
+
+Row convention of every simulation in the package (:func:`propagate`, :func:`simulate_zoh`,
+:func:`simulate_foh`, :func:`railpaper.models.lateral_16state.simulate_truth`,
+:func:`railpaper.models.linear_toys.simulate_linear`): K steps give states of shape (K+1, n) with
+``x[0] = x0`` and ``x[k]`` the state after step k; a held input has K rows, ``u[k-1]`` acting over
+step k (``x[k] = Phi x[k-1] + Gamma u[k-1]``); measurements have K rows, ``y[k-1]`` measuring
+``x[k]``.  A first-order hold needs the input at both ends of every step, so its input has the
+K+1 rows of the state times.
 """
 
 from __future__ import annotations
@@ -76,37 +84,76 @@ def foh(A: np.ndarray, B: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarr
     return E[..., :n, :n], E[..., :n, n:n + m], E[..., :n, n + m:]
 
 
-def simulate_foh(Phi: np.ndarray, Gamma0: np.ndarray, Gamma1: np.ndarray, u: np.ndarray,
-                 x0: np.ndarray | None = None) -> np.ndarray:
-    """States of ``x[k+1] = Phi x[k] + Gamma0 u[k] + Gamma1 (u[k+1] - u[k])``.
+def propagate(Phi: np.ndarray, drive: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+    """States of ``x[k] = Phi x[k-1] + drive[k-1]``, k = 1 … K: the one simulation loop.
 
     Parameters
     ----------
-    u : ndarray, shape (K, m)
-        Input samples.
+    Phi : ndarray, shape (n, n)
+        Transition matrix over one step.
+    drive : ndarray, shape (K, n)
+        What enters the state in each step (input and noise terms), state units.
     x0 : ndarray, shape (n,), optional
         Initial state (zero by default).
 
     Returns
     -------
-    x : ndarray, shape (K, n)
-        ``x[0] = x0``.
+    x : ndarray, shape (K+1, n)
+        ``x[0] = x0``, ``x[k]`` the state after step k.
     """
-    u = np.asarray(u, dtype=float)
-    if u.ndim == 1:
-        u = u[:, None]
-    n = Phi.shape[0]
-    x = np.zeros((len(u), n))
+    drive = np.asarray(drive, dtype=float)
+    x = np.zeros((len(drive) + 1, Phi.shape[0]))
     if x0 is not None:
         x[0] = x0
-    drive = u[:-1] @ (Gamma0 - Gamma1).T + u[1:] @ Gamma1.T   # input term of each step
-    for k in range(len(u) - 1):
+    for k in range(len(drive)):
         x[k + 1] = Phi @ x[k] + drive[k]
     return x
 
 
+def _as_rows(u: np.ndarray) -> np.ndarray:
+    u = np.asarray(u, dtype=float)
+    return u[:, None] if u.ndim == 1 else u
+
+
+def simulate_foh(Phi: np.ndarray, Gamma0: np.ndarray, Gamma1: np.ndarray, u: np.ndarray,
+                 x0: np.ndarray | None = None) -> np.ndarray:
+    """States of ``x[k] = Phi x[k-1] + Gamma0 u[k-1] + Gamma1 (u[k] - u[k-1])`` (first-order hold).
+
+    Parameters
+    ----------
+    Phi, Gamma0, Gamma1 : ndarray
+        From :func:`foh`.
+    u : ndarray, shape (K+1, m) or (K+1,)
+        Input samples at the K+1 state times (the input is linear between them).
+    x0 : ndarray, shape (n,), optional
+        Initial state (zero by default).
+
+    Returns
+    -------
+    x : ndarray, shape (K+1, n)
+        ``x[0] = x0``, ``x[k]`` the state at the time of ``u[k]`` (as many rows as ``u``).
+    """
+    u = _as_rows(u)
+    drive = u[:-1] @ (Gamma0 - Gamma1).T + u[1:] @ Gamma1.T   # input term of each step
+    return propagate(Phi, drive, x0)
+
+
 def simulate_zoh(Phi: np.ndarray, Gamma: np.ndarray, u: np.ndarray,
                  x0: np.ndarray | None = None) -> np.ndarray:
-    """States of ``x[k+1] = Phi x[k] + Gamma u[k]`` with ``x[0] = x0``; shape (K, n)."""
-    zero = np.zeros_like(Gamma)
-    return simulate_foh(Phi, Gamma, zero, u, x0)
+    """States of ``x[k] = Phi x[k-1] + Gamma u[k-1]`` (zero-order hold), k = 1 … K.
+
+    Parameters
+    ----------
+    Phi, Gamma : ndarray
+        From :func:`zoh`: (n, n) and (n, m).
+    u : ndarray, shape (K, m) or (K,)
+        ``u[k-1]`` is held over step k.
+    x0 : ndarray, shape (n,), optional
+        Initial state (zero by default).
+
+    Returns
+    -------
+    x : ndarray, shape (K+1, n)
+        ``x[0] = x0``, ``x[k]`` the state after step k (one row more than ``u``).
+    """
+    return propagate(Phi, _as_rows(u) @ Gamma.T, x0)

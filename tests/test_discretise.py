@@ -53,13 +53,38 @@ def test_zoh_stacked_equals_one_by_one():
 
 
 def test_simulate_zoh_matches_scipy_dlsim():
+    """K held inputs give K+1 states (x[0] = x0, x[k] after step k); dlsim returns the states
+    before each input, so it is given one more (unused) input row to reach x[K]."""
     from scipy.signal import dlsim
     A, B = random_stable_system(7)
     Phi, Gamma = zoh(A, B, 0.02)
     u = np.random.default_rng(0).standard_normal((50, 2))
     x0 = np.ones(4)
-    _, _, x_ref = dlsim((Phi, Gamma, np.eye(4), np.zeros((4, 2)), 0.02), u, x0=x0)
-    np.testing.assert_allclose(simulate_zoh(Phi, Gamma, u, x0), x_ref, rtol=1e-12, atol=1e-12)
+    _, _, x_ref = dlsim((Phi, Gamma, np.eye(4), np.zeros((4, 2)), 0.02),
+                        np.vstack([u, np.zeros((1, 2))]), x0=x0)
+    x = simulate_zoh(Phi, Gamma, u, x0)
+    assert x.shape == (51, 4)
+    np.testing.assert_allclose(x, x_ref, rtol=1e-12, atol=1e-12)
+
+
+def test_simulate_zoh_is_the_continuous_response_to_a_held_input():
+    """x[K] against a Runge-Kutta solution of ẋ = A x + B u with u piecewise constant."""
+    A, B = random_stable_system(11)
+    dt, u = 0.05, np.random.default_rng(1).standard_normal((6, 2))
+    x = simulate_zoh(*zoh(A, B, dt), u)
+    ref = np.zeros(4)
+    for k in range(len(u)):
+        ref = solve_ivp(lambda t, z: A @ z + B @ u[k], (0, dt), ref, rtol=1e-12,
+                        atol=1e-14).y[:, -1]
+        np.testing.assert_allclose(x[k + 1], ref, rtol=1e-8, atol=1e-12)
+    assert x.shape == (7, 4) and not x[0].any()
+
+
+def test_simulate_foh_has_a_row_per_input_sample():
+    A, B = random_stable_system(5)
+    u = np.random.default_rng(2).standard_normal((8, 2))
+    assert simulate_foh(*foh(A, B, 0.01), u).shape == (8, 4)
+    assert simulate_foh(*foh(A, B, 0.01), u[:1], np.ones(4)).tolist() == [[1.0] * 4]
 
 
 def test_non_positive_step_rejected():

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from railpaper.batch_expm import zoh_stack
-from railpaper.discretise import zoh
+from railpaper.discretise import simulate_zoh, zoh
 from railpaper.linear_gaussian import LinearGaussianBatch
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
@@ -166,14 +166,30 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
 
 def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fine: np.ndarray,
                    ) -> np.ndarray:
-    """States on the fine grid (K+1, 16) from rest, ZOH of the fine input u_fine (K, 2)."""
+    """States on the fine grid from rest, exact for an input held over each fine step.
+
+    Parameters
+    ----------
+    fixed : dict
+        Fixed quantities (:data:`FIXED_KEYS`, SI units).
+    theta : array_like, shape (5,)
+        (Csy N s/m, λ, Kpy N/m, Ksy N/m, Csaly N s/m).
+    speed_mps : float
+        Vehicle speed, m/s.
+    dt_fine_s : float
+        Fine step, s.
+    u_fine : ndarray, shape (K, 2)
+        ``u_fine[k-1]`` = (ẏt1, ẏt2), m/s, held over fine step k.
+
+    Returns
+    -------
+    x : ndarray, shape (K+1, 16)
+        ``x[0] = 0`` (rest), ``x[k]`` the state after fine step k (the package's row convention,
+        :mod:`railpaper.discretise`).
+    """
     A = build_A_direct(fixed, theta, speed_mps)
     F, G = zoh(A, input_matrix(), dt_fine_s)
-    x = np.zeros((len(u_fine) + 1, N_STATES))
-    drive = u_fine @ G.T
-    for k in range(len(u_fine)):
-        x[k + 1] = F @ x[k] + drive[k]
-    return x
+    return simulate_zoh(F, G, u_fine, np.zeros(N_STATES))
 
 
 def ekf_model(fixed: dict, speed_mps: float, dt_s: float):

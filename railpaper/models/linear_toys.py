@@ -13,7 +13,8 @@
 Timing convention shared by the simulators and the estimators: for k = 1 … K first
 ``x_k = F x_{k-1} + B u_k + G w_{k-1}``, then ``y_k = H x_k + e_k``; row ``k-1`` of the returned
 ``y`` and ``u`` arrays belongs to step k (``u_k`` is the input of the transition into step k,
-the paper's u(n-1)).
+the paper's u(n-1)).  This is the package's row convention (:mod:`railpaper.discretise`): K steps
+give states (K+1, n) with ``x[0] = x_0``, inputs (K, m) and measurements (K, p).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from typing import Callable
 
 import numpy as np
 
+from railpaper.discretise import propagate
 from railpaper.linear_gaussian import LinearGaussianBatch
 
 PAPER004_G = np.array([[-1.0, 0.38], [-1.5, 1.0]])
@@ -96,17 +98,36 @@ def simulate_linear(F: np.ndarray, G: np.ndarray, H: np.ndarray, Qw: np.ndarray,
 
     Random numbers are drawn in a fixed order (x_0, then all w, then all e), so the same
     generator state gives the same record.  ``x_0 ~ N(0, P0)``.
+
+    Parameters
+    ----------
+    F, G, H : ndarray
+        (n, n), (n, q), (p, n).
+    Qw, R : ndarray
+        Covariances of w (q, q) and e (p, p).
+    P0 : ndarray, shape (n, n)
+        Covariance of x_0.
+    n_steps : int
+        K.
+    rng : numpy.random.Generator
+    B : ndarray, shape (n, m), optional
+    u : ndarray, shape (K, m) or (K,), optional
+        ``u[k-1]`` is u_k, the input of the transition into step k.
+
+    Returns
+    -------
+    Simulation
+        ``x`` (K+1, n) with ``x[0] = x_0``; ``y`` (K, p) with ``y[k-1] = H x[k] + e_k``;
+        ``u`` (K, m) or None (units those of the model).
     """
     n = F.shape[0]
-    x = np.zeros((n_steps + 1, n))
-    x[0] = rng.standard_normal(n) @ _root(P0).T
+    x0 = rng.standard_normal(n) @ _root(P0).T
     w = rng.standard_normal((n_steps, G.shape[1])) @ _root(Qw).T
     e = rng.standard_normal((n_steps, H.shape[0])) @ _root(R).T
     drive = w @ G.T
     if B is not None and u is not None:
         drive = drive + np.asarray(u, float).reshape(n_steps, -1) @ B.T
-    for k in range(1, n_steps + 1):
-        x[k] = F @ x[k - 1] + drive[k - 1]
+    x = propagate(F, drive, x0)
     y = x[1:] @ H.T + e
     return Simulation(x=x, y=y, u=None if u is None else np.asarray(u, float).reshape(n_steps, -1))
 
