@@ -25,3 +25,23 @@ def settled_index(ok) -> int:
     if failing[-1] == len(ok) - 1:
         return -1
     return int(failing[-1]) + 1
+
+
+def settling_step_to_final(estimate, tolerance: float) -> int:
+    """First step (1-based) from which ``estimate`` stays within ``tolerance`` of its own last
+    value — what one reads off a plot as "converged at step k".
+
+    Parameters
+    ----------
+    estimate : array_like, shape (K,)
+        The estimate after steps 1 … K (same unit as ``tolerance``).
+    tolerance : float
+        Half-width of the band around the last value.
+
+    Returns
+    -------
+    int
+        In 1 … K (the last sample is always within its own band).
+    """
+    estimate = np.asarray(estimate, dtype=float)
+    return settled_index(np.abs(estimate - estimate[-1]) <= tolerance) + 1
