@@ -119,7 +119,7 @@ def mixture_moments_steps(x: np.ndarray, var: np.ndarray, weights: np.ndarray
         return mean, np.sqrt(spread)
     scale = np.maximum(np.abs(centred).max(axis=0), np.sqrt(var.max(axis=0)))
     scale = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)   # no overflow in squares
-    spread = np.einsum("jn,njd->jd", weights, var / scale ** 2 + (centred / scale) ** 2)
+    spread = np.einsum("jn,njd->jd", weights, (np.sqrt(var) / scale) ** 2 + (centred / scale) ** 2)
     return mean, scale * np.sqrt(spread)
 
 
