@@ -158,3 +158,45 @@ def run_readings(*, truth=(-0.7, 1.5), lower=(-1.0, 1.0), upper=(0.4, 2.8), n_re
                                  abs_error_rbpf_step=ek, std_step4=s4, std_rbpf_step=sk))
     return ReadingsStudy(readings=readings, horizons_steps=horizons, table=pd.DataFrame(rows),
                          errors=pd.DataFrame(err_rows), settling_steps=steps)
+
+
+def plot_readings(study: ReadingsStudy):
+    """Median settling step of the exact posterior mean vs the figure's horizon, one line per
+    reading, with the paper's RBPF (55 / 53 ± 5) and Q-GRBPF (4 ± 5) steps shaded.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(7, 3.6), sharey=True, layout="constrained")
+    markers = "osd^v"
+    colours = ("tab:blue", "tab:orange", "black", "tab:purple", "tab:brown")
+    for ax, par in zip(axes, PARAMS):
+        rbpf = PAPER_STEPS[(par, "rbpf")]
+        ax.axhspan(rbpf - 5, rbpf + 5, color="tab:red", alpha=0.15, lw=0)
+        ax.axhspan(1, 9, color="tab:green", alpha=0.15, lw=0)
+        ax.text(study.horizons_steps[-1], rbpf + 6, f"RBPF: step {rbpf}", ha="right",
+                va="bottom", fontsize=8, color="tab:red")
+        ax.text(study.horizons_steps[-1], 10, "Q-GRBPF: step 4", ha="right", va="bottom",
+                fontsize=8, color="tab:green")
+        for reading, marker, colour in zip(study.readings, markers, colours):
+            rows = study.table[(study.table.reading == reading.key)
+                               & (study.table.parameter == par)]
+            h = rows.horizon_steps.to_numpy()
+            ax.errorbar(h, rows.settling_step, fmt=f"-{marker}", ms=4, capsize=2,
+                        yerr=[rows.settling_step - rows.settling_step_low,
+                              rows.settling_step_high - rows.settling_step],
+                        color=colour, label=reading.label)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xticks(study.horizons_steps, [str(h) for h in study.horizons_steps])
+        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.set_xlabel("figure horizon (steps)")
+        ax.set_title(f"parameter {par}", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    axes[0].set_ylabel("settling step of the\nexact posterior mean")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=1,
+               fontsize=8, frameon=False)
+    return fig
