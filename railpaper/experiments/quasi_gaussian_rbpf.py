@@ -36,6 +36,7 @@ from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_filter
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
                                         no_progress)
+from railpaper.experiments.base import check_banks
 from railpaper.experiments.quasi_gaussian_rbpf_evidence import (FILTERS, NO_THRESHOLD, PARAMS,
                                                           QGRBPF_READINGS, descriptive_metrics,
                                                           evidence_metrics)
@@ -129,6 +130,13 @@ def validate(p: dict) -> None:
                              f"got {p['eq10_reading']!r}")
     if max(p["timing_particles"]) < 2:
         raise ParameterError("timing_particles needs at least one count >= 2")
+    check_banks([("n_particles", p["n_particles"], p["n_particles"], 2, 6, "the RBPF and Q-GRBPFs"),
+                 ("timing_particles", p["timing_particles"],
+                  max(p["timing_particles"]) * p["timing"], 2, 6, "the timed filters"),
+                 ("timing_ratio_particles", p["timing_ratio_particles"],
+                  p["timing_ratio_particles"] * p["timing"], 2, 6, "the timed filters"),
+                 ("grid_size", p["grid_size"], p["grid_size"] ** 2, 2, 6 + p["n_steps"],
+                  "the exact posterior's grid of Kalman filters")])
 
 
 def _box(p: dict) -> tuple[np.ndarray, np.ndarray]:

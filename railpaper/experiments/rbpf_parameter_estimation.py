@@ -34,6 +34,7 @@ from railpaper.estimators.rbpf import run_rbpf
 from railpaper.experiments import rbpf_parameter_estimation_mc as mc
 from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
                                         check_sample_time, no_progress)
+from railpaper.experiments.base import check_banks
 from railpaper.experiments.rbpf_parameter_estimation_io import one_thread, read_measurements
 from railpaper.experiments.rbpf_parameter_estimation_toy import run_toy
 from railpaper.models import lateral_16state as L
@@ -233,6 +234,9 @@ def validate(p: dict) -> None:
     fixed, theta = vehicle()
     check_sample_time("dt_s", p["dt_s"], L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6),
                       f"the lateral model at {p['speed_kmh']:g} km/h")
+    check_banks([("toy_particles", p["toy_particles"], p["toy_particles"], 2, 10, "the toy RBPF"),
+                 ("n_particles", p["n_particles"], p["n_particles"] * p["lateral"], L.N_STATES,
+                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF (F, H, G per particle)")])
     if p["measurements_csv"]:
         read_measurements(p["measurements_csv"], p)
 
