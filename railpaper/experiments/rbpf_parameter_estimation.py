@@ -236,7 +236,7 @@ def validate(p: dict) -> None:
                       f"the lateral model at {p['speed_kmh']:g} km/h")
     check_banks([("toy_particles", p["toy_particles"], p["toy_particles"], 2, 10, "the toy RBPF"),
                  ("n_particles", p["n_particles"], p["n_particles"] * p["lateral"], L.N_STATES,
-                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF (F, H, G per particle)")])
+                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF, F, H, G per particle")])
     if p["measurements_csv"]:
         read_measurements(p["measurements_csv"], p)
 
