@@ -180,11 +180,11 @@ def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
     in_process = qg.run(quick=True, **small)
     on_sweep = qg.run(quick=True, monte_carlo=on_workers, **small)
     assert in_process.metrics == on_sweep.metrics
-    pd.testing.assert_frame_equal(in_process.data["monte_carlo"], on_sweep.data["monte_carlo"])
-    assert on_sweep.data["monte_carlo"].replicate.tolist() == [2, 3, 4]
+    pd.testing.assert_frame_equal(in_process.monte_carlo, on_sweep.monte_carlo)
+    assert on_sweep.monte_carlo.replicate.tolist() == [2, 3, 4]
     assert frames[0].record.tolist() == [3, 4] and (frames[0].status == "ok").all()
     alone = qg.run(quick=True, **dict(small, record=4, n_monte_carlo=1)).metrics
-    row = on_sweep.data["monte_carlo"].iloc[2]
+    row = on_sweep.monte_carlo.iloc[2]
     assert all(row[k] == alone[k] for k in row.index if k != "replicate")
     with pytest.raises(ValueError, match="records incomplete"):
         qg.run(quick=True, monte_carlo=lambda p, r, _: on_workers(p, r[:1], _), **small)

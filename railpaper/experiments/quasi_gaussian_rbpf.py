@@ -1,8 +1,9 @@
-"""Chapter "quasi-gaussian-rbpf": paper 004's Q-GRBPF versus the RBPF, against the exact posterior.
+"""Chapter "quasi-gaussian-rbpf": the Q-GRBPF versus the RBPF, against the exact posterior.
 
-One record of paper 004's toy (Eqs. 20–21, our reading) is filtered by
+One record of the Q-GRBPF paper's toy (Eqs. 20–21, our reading) is filtered by
 
-* ``rbpf``            — the RBPF as papers 003/004 describe it (resample + Liu–West every step);
+* ``rbpf``            — the RBPF as Ding et al. (2014) describe it (resample + Liu–West every
+  step);
 * ``rbpf_working``    — the same engine, resampling when ESS < N/2 and moving only then;
 * ``qgrbpf``          — the Q-GRBPF with Eq. (10) read as an importance ratio (= 1);
 * ``qgrbpf_printed``  — the Q-GRBPF with Eq. (10) read literally (weights = Gaussian density),
@@ -20,7 +21,8 @@ process.  The statistics the claim rules read are computed from the records by
 :mod:`~railpaper.experiments.quasi_gaussian_rbpf_evidence`; the computing times (curves over N and
 paired repeats at the paper's N) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf_timing`.
 ``eq10_reading`` only selects which Q-GRBPF the illustrations show in full: the evidence of both
-readings is always computed.
+readings is always computed.  :func:`run` returns a
+:class:`~railpaper.experiments.quasi_gaussian_rbpf_result.QuasiGaussianRBPFResult` (named fields).
 """
 
 from __future__ import annotations
@@ -34,12 +36,13 @@ import pandas as pd
 from railpaper.estimators.grid_posterior import grid_posterior
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF, run_filter
-from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
-                                        no_progress)
+from railpaper.experiments.base import ChapterSpec, Parameter, ParameterError, no_progress
 from railpaper.experiments.base import check_banks
 from railpaper.experiments.quasi_gaussian_rbpf_evidence import (FILTERS, NO_THRESHOLD, PARAMS,
                                                           QGRBPF_READINGS, descriptive_metrics,
                                                           evidence_metrics)
+from railpaper.experiments.quasi_gaussian_rbpf_result import (ComputingTime, OneRecord,
+                                                        QuasiGaussianRBPFResult)
 from railpaper.experiments.quasi_gaussian_rbpf_timing import timing
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
 from railpaper.settling import settled_index
@@ -82,7 +85,7 @@ SPEC = ChapterSpec(
         P("n_monte_carlo", 100, "int", "records (seeds) of the Monte Carlo study", quick=50,
           minimum=1),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
-          "Monte Carlo records are record+1, record+2, …", minimum=0),
+          "Monte Carlo records are record+1, record+2 and so on", minimum=0),
         P("timing", True, "bool", "measure computing times (false: a Monte Carlo sample of a "
           "sweep, which needs only the record's metrics)"),
         P("timing_particles", [100, 300, 1000, 3000, 10000], "list[int]",
@@ -139,13 +142,26 @@ def validate(p: dict) -> None:
                   "the exact posterior's grid of Kalman filters")])
 
 
-def _box(p: dict) -> tuple[np.ndarray, np.ndarray]:
+def prior_box(p: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners ``(a_min, b_min)``, ``(a_max, b_max)`` of the uniform prior (1)."""
     return np.array([p["a_min"], p["b_min"]]), np.array([p["a_max"], p["b_max"]])
 
 
-def _make_filter(name: str, p: dict, system, theta0, rng):
+def initial_state(p: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Initial mean ``x0 = 0`` and covariance ``P0 = p0_std² I`` of every particle's Kalman
+    filter (and of the exact posterior's)."""
+    return np.zeros(2), p["p0_std"] ** 2 * np.eye(2)
+
+
+def prior_particles(p: dict, rng: np.random.Generator) -> np.ndarray:
+    """``n_particles`` initial parameter particles (N, 2), uniform on :func:`prior_box`."""
+    lower, upper = prior_box(p)
+    return lower + (upper - lower) * rng.random((p["n_particles"], 2))
+
+
+def make_filter(name: str, p: dict, system, theta0, rng):
     """Filter ``name`` (one of FILTERS, or a Q-GRBPF name + NO_THRESHOLD)."""
-    x0, P0 = np.zeros(2), p["p0_std"] ** 2 * np.eye(2)
+    x0, P0 = initial_state(p)
     if name == "rbpf":
         return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="paper",
                                   delta=p["liu_west_delta"])
@@ -160,8 +176,9 @@ def _make_filter(name: str, p: dict, system, theta0, rng):
                              weight_threshold=threshold)
 
 
-def _streams(seed: int, replicate: int) -> dict[str, np.random.Generator]:
-    """Independent generators per use, fixed by (seed, replicate)."""
+def streams(seed: int, replicate: int) -> dict[str, np.random.Generator]:
+    """Independent generators per use (``data``, ``prior`` and one per filter), fixed by
+    (seed, replicate)."""
     names = ("data", "prior") + FILTERS
     children = np.random.SeedSequence([seed, replicate]).spawn(len(names))
     return {n: np.random.default_rng(c) for n, c in zip(names, children)}
@@ -187,29 +204,29 @@ def settling_step(estimate: np.ndarray, tolerance: float) -> int:
     return settled_index(np.abs(estimate - estimate[-1]) <= tolerance) + 1
 
 
-def replicate(p: dict, index: int) -> dict:
+def replicate(p: dict, index: int) -> OneRecord:
     """Simulate record ``index``, run the four filters, the two Q-GRBPFs without threshold (on
     the same random streams as with it) and the exact posterior on it."""
-    streams = _streams(p["seed"], index)
+    gen = streams(p["seed"], index)
     system = paper004_system(p["q_var"], p["r_var"])
     sim = simulate_paper004(p["a_true"], p["b_true"], p["q_var"], p["r_var"], p["p0_std"],
-                            p["n_steps"], streams["data"])
-    lower, upper = _box(p)
-    theta0 = lower + (upper - lower) * streams["prior"].random((p["n_particles"], 2))
-    exact = grid_posterior(system, sim.y, lower, upper, p["grid_size"], np.zeros(2),
-                           p["p0_std"] ** 2 * np.eye(2))
-    runs = {name: run_filter(_make_filter(name, p, system, theta0, streams[name]), sim.y)
+                            p["n_steps"], gen["data"])
+    lower, upper = prior_box(p)
+    theta0 = prior_particles(p, gen["prior"])
+    exact = grid_posterior(system, sim.y, lower, upper, p["grid_size"], *initial_state(p))
+    runs = {name: run_filter(make_filter(name, p, system, theta0, gen[name]), sim.y)
             for name in FILTERS}
-    off = {q + NO_THRESHOLD: run_filter(_make_filter(q + NO_THRESHOLD, p, system, theta0,
-                                                     _streams(p["seed"], index)[q]), sim.y)
+    off = {q + NO_THRESHOLD: run_filter(make_filter(q + NO_THRESHOLD, p, system, theta0,
+                                                    streams(p["seed"], index)[q]), sim.y)
            for q in QGRBPF_READINGS}
-    return dict(sim=sim, exact=exact, runs=runs, runs_nothreshold=off)
+    return OneRecord(index=index, states=sim.x, measurements=sim.y, exact=exact, runs=runs,
+                     runs_without_threshold=off)
 
 
-def record_metrics(p: dict, rep: dict) -> dict:
+def record_metrics(p: dict, rep: OneRecord) -> dict:
     """Per-record metrics (all filters, both parameters; final error and z of the Q-GRBPFs
     without threshold)."""
-    exact, truth = rep["exact"], (p["a_true"], p["b_true"])
+    exact, truth = rep.exact, (p["a_true"], p["b_true"])
     short = min(p["short_horizon"], p["n_steps"]) - 1  # index of that step (or the last)
     m = {}
     for j, par in enumerate(PARAMS):
@@ -221,7 +238,7 @@ def record_metrics(p: dict, rep: dict) -> dict:
         m[f"settling_step_{par}_posterior"] = settling_step(mean, p["tolerance_to_truth"])
         below = np.flatnonzero(std <= p["tolerance_to_truth"])
         m[f"posterior_std_below_tolerance_step_{par}"] = int(below[0]) + 1 if below.size else -1
-        for name, run in rep["runs"].items():
+        for name, run in rep.runs.items():
             est = run.theta_mean[:, j]
             m[f"convergence_step_{par}_{name}"] = convergence_step(est, mean, std)
             m[f"first_within_{par}_{name}"] = first_within(est, truth[j], p["tolerance_to_truth"])
@@ -230,16 +247,16 @@ def record_metrics(p: dict, rep: dict) -> dict:
             m[f"short_error_{par}_{name}"] = est[short] - truth[j]
             m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
             m[f"final_std_ratio_{par}_{name}"] = run.theta_std[-1, j] / std[-1]
-        for name, run in rep["runs_nothreshold"].items():
+        for name, run in rep.runs_without_threshold.items():
             est = run.theta_mean[:, j]
             m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
             m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
     return m
 
 
-def _timeseries(p: dict, rep: dict) -> pd.DataFrame:
-    sim, exact, runs = rep["sim"], rep["exact"], rep["runs"]
-    cols = {"step": np.arange(1, p["n_steps"] + 1), "y1": sim.y[:, 0], "y2": sim.y[:, 1]}
+def _timeseries(p: dict, rep: OneRecord) -> pd.DataFrame:
+    exact, runs = rep.exact, rep.runs
+    cols = {"step": rep.steps, "y1": rep.measurements[:, 0], "y2": rep.measurements[:, 1]}
     for name in ("rbpf", "qgrbpf"):
         cols[f"a_est_{name}"], cols[f"b_est_{name}"] = runs[name].theta_mean.T
     cols["a_post_mean"], cols["b_post_mean"] = exact.mean.T
@@ -249,7 +266,7 @@ def _timeseries(p: dict, rep: dict) -> pd.DataFrame:
     for name in FILTERS:
         cols[f"a_std_{name}"], cols[f"b_std_{name}"] = runs[name].theta_std.T
         cols[f"ess_{name}"] = runs[name].ess
-    cols["x1_true"], cols["x2_true"] = sim.x[1:].T
+    cols["x1_true"], cols["x2_true"] = rep.states[1:].T
     for name in FILTERS:
         cols[f"x1_est_{name}"], cols[f"x2_est_{name}"] = runs[name].x_mean.T
     return pd.DataFrame(cols)
@@ -258,14 +275,13 @@ def _timeseries(p: dict, rep: dict) -> pd.DataFrame:
 def _timing(p: dict, y: np.ndarray, progress):
     """Computing times on the main record (:func:`quasi_gaussian_rbpf_timing.timing`)."""
     system = paper004_system(p["q_var"], p["r_var"])
-    lower, upper = _box(p)
 
-    def make_filter(name: str, n: int, repeat: int):
-        streams = _streams(p["seed"], repeat)
-        theta0 = lower + (upper - lower) * streams["prior"].random((n, 2))
-        return _make_filter(name, p, system, theta0, streams[name])
+    def fresh_filter(name: str, n: int, repeat: int):
+        gen = streams(p["seed"], repeat)
+        return make_filter(name, p, system, prior_particles(dict(p, n_particles=n), gen["prior"]),
+                           gen[name])
 
-    return timing(p, make_filter, FILTERS, y, progress)
+    return timing(p, fresh_filter, FILTERS, y, progress)
 
 
 def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.DataFrame:
@@ -277,7 +293,8 @@ def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.
     return pd.DataFrame(rows)
 
 
-def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> ChapterResult:
+def run(*, quick: bool = False, progress=None, monte_carlo=None,
+        **params) -> QuasiGaussianRBPFResult:
     """Run the chapter: main record, Monte Carlo over records, computing times.
 
     Parameters
@@ -293,6 +310,13 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> Ch
         Default: :func:`records_in_process`.
     **params
         Chapter parameters (:data:`SPEC`).
+
+    Returns
+    -------
+    QuasiGaussianRBPFResult
+        Metrics, timings, the main record's time series and the Monte Carlo table for the
+        pipeline; the main record (:class:`OneRecord`), the Monte Carlo table and the computing
+        times (:class:`ComputingTime`) as named fields.
 
     Notes
     -----
@@ -312,7 +336,7 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None, **params) -> Ch
         numba.set_num_threads(threads)
 
 
-def _run(p: dict, progress, monte_carlo) -> ChapterResult:
+def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
     """:func:`run` on resolved, validated parameters, on one numba thread."""
     start = time.perf_counter()
     main = replicate(p, p["record"])
@@ -331,17 +355,16 @@ def _run(p: dict, progress, monte_carlo) -> ChapterResult:
     metrics = {k: v for k, v in first.items() if k != "replicate"}
     metrics.update(descriptive_metrics(mc_table, p["n_steps"]))
     metrics.update(evidence_metrics(mc_table, {"a": p["a_true"], "b": p["b_true"]}))
-    exact = main["exact"]
-    metrics["grid_min_std_over_spacing"] = exact.min_std_over_spacing
-    metrics["grid_edge_mass"] = exact.edge_mass
-    timings, timing_table, timing_samples = (_timing(p, main["sim"].y, progress) if p["timing"]
-                                             else ({}, None, None))
+    metrics["grid_min_std_over_spacing"] = main.exact.min_std_over_spacing
+    metrics["grid_edge_mass"] = main.exact.edge_mass
+    timings, timing_table, timing_samples = (_timing(p, main.measurements, progress)
+                                             if p["timing"] else ({}, None, None))
     timings["monte_carlo_seconds"] = mc_seconds
     progress(1.0, "done")
-    return ChapterResult(
+    return QuasiGaussianRBPFResult(
         metrics=metrics, timings=timings, timeseries=_timeseries(p, main),
         extra_tables=dict({"monte_carlo": mc_table},
                           **({} if timing_samples is None else {"timing_samples": timing_samples})),
-        data={"timing_table": timing_table, "timing_samples": timing_samples, "exact": exact,
-              "runs": main["runs"], "runs_nothreshold": main["runs_nothreshold"],
-              "sim": main["sim"], "monte_carlo": mc_table, "filters": FILTERS})
+        main=main, monte_carlo=mc_table,
+        computing_time=(None if timing_table is None
+                        else ComputingTime(timing_table, timing_samples)))
