@@ -60,7 +60,7 @@ def test_toy_only_sample_is_one_record_of_the_main_run(quick_result):
     assert sample.timeseries is None
     assert not any(k.startswith(("critical_speed", "steps_to_within", "crlb", "ekf_lateral",
                                  "lateral_")) for k in sample.metrics)
-    stats = result.data["toy_stats"]
+    stats = result.toy.records
     for ic in (1, 2):
         row = stats[(stats.seed == seed) & (stats.init == ic)].iloc[0]
         assert sample.metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] == row.rbpf_err_max
@@ -75,10 +75,12 @@ def test_monte_carlo_records_are_consecutive_seeds(quick_result):
     """Records seed, seed + 1, ... (so seed batches k * 1000 are disjoint), each filtered from
     both initial conditions; the lateral evidence counts n_records records."""
     params, result = quick_result
-    stats = result.data["toy_stats"]
+    stats = result.toy.records
     seeds = list(range(params["seed"], params["seed"] + params["toy_seeds"]))
     assert sorted(stats[stats.init == 1].seed) == seeds == sorted(stats[stats.init == 2].seed)
-    assert len(result.data["runs"]["paper"]) == len(result.data["runs"]["working"]) == \
+    assert [run.seed for run in result.lateral.runs] == list(
+        range(params["seed"], params["seed"] + params["n_records"]))
+    assert len(result.lateral.runs) == \
         params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"]
     assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
     assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
@@ -124,7 +126,7 @@ def test_measurements_csv_validation(tmp_path):
     good["t_s"] = np.arange(20) * 1e-3
     good.to_csv(tmp_path / "ok.csv", index=False)
     rec = chapter.read_measurements(str(tmp_path / "ok.csv"), params)
-    assert rec["y"].shape == (20, 5) and rec["u"] is None
+    assert rec.y.shape == (20, 5) and rec.u_mps is None and rec.seed is None
 
 
 def test_one_thread_restores_the_thread_counts():
@@ -147,3 +149,63 @@ def test_lateral_rbpf_survives_degenerate_weights():
     run = run_rbpf(system, y, theta * rng.uniform(0.5, 1.7, (20, 5)), np.zeros(16),
                    1e-10 * np.eye(16), rng, u=np.zeros((30, 2)), scheme="paper")
     assert np.all(np.isfinite(run.theta_mean)) and np.all(np.isfinite(run.x_mean))
+
+
+def _steps_by_loop(column, tol=0.05):
+    """First step (1-based) from which |x − 1| <= tol to the end, -1 if never: a written-out loop."""
+    for k in range(len(column)):
+        if all(abs(x - 1.0) <= tol for x in column[k:]):
+            return k + 1
+    return -1
+
+
+def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
+    """The named fields are what the pipeline writes and what the metrics were computed from:
+    the time series, the per-parameter steps (against a written-out loop), the EKF count and
+    guesses per record, and the illustrated record filtered by hand with the estimator."""
+    from railpaper.experiments.rbpf_parameter_estimation_io import one_thread
+
+    params, result = quick_result
+    lat, m = result.lateral, result.metrics
+    assert lat.stack("rbpf_paper_norm").shape == (params["n_records"], params["n_steps"], 5)
+    np.testing.assert_array_equal(result.timeseries.t_s, lat.t_s)
+    for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
+        norm = getattr(lat.illustrated, field)
+        cols = [f"{p}_norm{suffix}" for p in PARAMS]
+        np.testing.assert_array_equal(result.timeseries[cols].to_numpy(), norm)
+        for j, name in enumerate(PARAMS):
+            assert m[f"steps_to_within_5pct_{name}{suffix}"] == _steps_by_loop(norm[:, j])
+            assert m[f"final_relative_error_{name}{suffix}"] == norm[-1, j] - 1
+    ekf = lat.illustrated.ekf_norm
+    assert len(ekf) == params["ekf_guesses"] and all(len(r.ekf_norm) == 1 for r in lat.runs[1:])
+    within = [bool(np.all(np.abs(r[-1] - 1) <= 0.05)) for r in ekf]
+    assert lat.ekf_converged_count == sum(within) == m["ekf_lateral_converged_count"]
+    assert list(lat.crlb.parameter) == list(PARAMS)
+    np.testing.assert_array_equal(lat.crlb.known_350, [m[f"crlb_rel_350_{p}"] for p in PARAMS])
+    fixed, theta = chapter.vehicle()
+    np.testing.assert_array_equal(lat.theta_true, theta)
+    with one_thread():                                  # the run's thread settings
+        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
+        Q, R = chapter.filter_noise(fixed, theta, params, record.du_var_m2ps2)
+        rng = np.random.default_rng([params["seed"], 11])   # documented: prior, then the filter
+        theta0 = theta * rng.uniform(params["prior_low"], params["prior_high"], (200, 5))
+        run = run_rbpf(L.lateral_system(fixed, params["speed_kmh"] / 3.6, params["dt_s"], Q, R),
+                       record.y, theta0, np.zeros(16), 1e-10 * np.eye(16), rng, u=record.u_mps,
+                       scheme="paper", delta=params["paper_delta"])
+    np.testing.assert_array_equal(run.theta_mean / theta, lat.illustrated.rbpf_paper_norm)
+
+
+def test_user_record_input_is_held_one_step(tmp_path):
+    """u_k is the track velocity of row k − 1 (row 0 repeated); the process noise is the
+    variance of its changes (numpy by hand)."""
+    params = chapter.SPEC.resolve({}, quick=True)
+    t = np.arange(30) * 1e-3
+    u1, u2 = np.sin(40 * t), np.cos(25 * t)
+    frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in L.CHANNELS}, "ydot_t1_mps": u1,
+                          "ydot_t2_mps": u2})
+    frame.to_csv(tmp_path / "u.csv", index=False)
+    rec = chapter.read_measurements(str(tmp_path / "u.csv"), params)
+    np.testing.assert_array_equal(rec.u_mps[1:], np.column_stack([u1, u2])[:-1])
+    np.testing.assert_array_equal(rec.u_mps[0], [u1[0], u2[0]])
+    np.testing.assert_allclose(rec.du_var_m2ps2, [np.var(np.diff(u1)), np.var(np.diff(u2))],
+                               rtol=1e-12)

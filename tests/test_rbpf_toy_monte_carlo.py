@@ -142,3 +142,53 @@ def test_evidence_table_rows_are_the_metrics():
     table = mc.evidence_table(m, {"b": "rate of b", "a": "median a"})
     assert list(table.statistic) == ["rate of b", "median a"]
     assert table.iloc[1][["value", "low", "high", "n"]].tolist() == [0.5, 0.2, 0.8, 20]
+
+
+def test_toy_records_follow_the_documented_draws_and_definitions():
+    """run_toy: record i draws from default_rng(seed + i) the simulation, then per initial
+    condition the prior, the paper RBPF, the working RBPF (same particles) and the EKF; each
+    row's final errors, flags and settle steps recomputed here from the estimators directly."""
+    from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
+    from railpaper.estimators.rbpf import run_rbpf
+    from railpaper.experiments import rbpf_parameter_estimation as chapter
+    from railpaper.experiments.rbpf_parameter_estimation_toy import run_toy
+    from railpaper.models.linear_toys import EQ18_G, eq18_system, simulate_eq18
+
+    p = chapter.SPEC.resolve({"seed": 5, "toy_seeds": 2, "toy_steps": 60, "toy_particles": 30,
+                              "toy_tempering_steps": 10}, quick=True)
+    part = run_toy(p)
+    truth, v = np.array([-0.4, 0.5, 0.5, 1.0]), 0.1
+    system = eq18_system(v, v)
+    starts = {1: np.zeros(4), 2: np.array([-0.26, 1.0, 0.24, -0.5])}
+    for i in range(2):
+        rng = np.random.default_rng(5 + i)
+        sim = simulate_eq18(truth, v, v, 60, rng)
+        for ic, start in starts.items():
+            theta0 = rng.uniform(start - 2.0, start + 2.0, (30, 4))
+            args = (system, sim.y, theta0, np.zeros(2), np.eye(2), rng)
+            paper = run_rbpf(*args, u=sim.u, scheme="paper", delta=0.98)
+            working = run_rbpf(*args, u=sim.u, scheme="working", delta=0.9, ess_fraction=0.8,
+                               tempering_steps=10)
+            ekf = run_augmented_ekf(eq18_model, sim.y, start, np.zeros(2), np.eye(2), 1.0,
+                                    v * EQ18_G @ EQ18_G.T, np.array([[v]]), 1e-6, u=sim.u,
+                                    divergence_bound=1e3)
+            row = part.records[(part.records.seed == 5 + i) & (part.records.init == ic)].iloc[0]
+            e_paper = np.abs(paper.theta_mean - truth).max(axis=1)
+            e_working = np.abs(working.theta_mean - truth).max(axis=1)
+            assert row.rbpf_err_max == e_paper[-1] and row.rbpf_working_err_max == e_working[-1]
+            assert row.rbpf_converged == (e_paper[-1] <= 0.2)
+            assert row.rbpf_settle == _settle_by_loop(e_paper, 0.2)
+            assert row.ekf_diverged == ekf.diverged
+            if not ekf.diverged:
+                e_ekf = np.abs(ekf.theta - truth).max(axis=1)
+                assert row.ekf_err_max == e_ekf[-1]
+                assert row.ekf_settle == _settle_by_loop(e_ekf, 0.2)
+                assert row.ekf_converged == (e_ekf[-1] <= 0.2)
+            if i == 0:
+                run = part.illustrated[ic]
+                np.testing.assert_array_equal(run.rbpf_paper, paper.theta_mean)
+                np.testing.assert_array_equal(run.rbpf_working, working.theta_mean)
+                np.testing.assert_array_equal(run.ekf, ekf.theta)
+    table = part.table()
+    assert list(table.columns[:2]) == ["step", "x1_rbpf_init1"] and len(table) == 60
+    np.testing.assert_array_equal(table.x3_ekf_init2, part.illustrated[2].ekf[:, 2])

@@ -1,4 +1,4 @@
-"""Chapter "rbpf-parameter-estimation": paper 003's RBPF versus an augmented-state EKF.
+"""Chapter "rbpf-parameter-estimation": Ding et al. (2014)'s RBPF versus an augmented-state EKF.
 
 Part 1 — Eq. (18) toy (:mod:`railpaper.experiments.rbpf_parameter_estimation_toy`): the RBPF
 exactly as the paper's Steps 1–2.6, our working scheme, and an augmented-state EKF from the
@@ -15,6 +15,12 @@ CRLB on the first record.  The Monte Carlo evidence of the claims (rates, median
 95 % intervals) is computed by :mod:`railpaper.experiments.rbpf_parameter_estimation_mc`.
 ``measurements_csv`` runs both RBPF schemes on a user's file (no evidence: it needs the truth).
 ``lateral=False`` skips Part 2 (sweep samples of the toy alone).
+
+:func:`run` returns a :class:`~railpaper.experiments.rbpf_parameter_estimation_result.
+RbpfParameterEstimationResult`: the metrics, timings and time series the pipeline writes, and
+the two parts' named results (``result.toy``, ``result.lateral``).  One record by hand:
+:func:`simulate_lateral`, :func:`filter_system`, :func:`lateral_rbpf`, :func:`lateral_ekf`
+(the toy's: :mod:`~railpaper.experiments.rbpf_parameter_estimation_toy`).
 """
 
 from __future__ import annotations
@@ -30,12 +36,14 @@ from railpaper.data import DATA_DIR, load_quantities
 from railpaper.discretise import zoh
 from railpaper.estimators.crlb import crlb_std, fisher_information
 from railpaper.estimators.ekf import run_augmented_ekf
-from railpaper.estimators.rbpf import run_rbpf
+from railpaper.estimators.rbpf import FilterRun, run_rbpf
 from railpaper.experiments import rbpf_parameter_estimation_mc as mc
-from railpaper.experiments.base import (ChapterResult, ChapterSpec, Parameter, ParameterError,
-                                        check_sample_time, no_progress)
+from railpaper.experiments.base import (ChapterSpec, Parameter, ParameterError, check_sample_time,
+                                        no_progress)
 from railpaper.experiments.base import check_banks
 from railpaper.experiments.rbpf_parameter_estimation_io import one_thread, read_measurements
+from railpaper.experiments.rbpf_parameter_estimation_result import (
+    LateralPart, LateralRecord, LateralRun, RbpfParameterEstimationResult)
 from railpaper.experiments.rbpf_parameter_estimation_toy import run_toy
 from railpaper.models import lateral_16state as L
 from railpaper.settling import settled_index
@@ -50,7 +58,7 @@ SPEC = ChapterSpec(
                 "(full: 30) x 500 steps, 200 particles, both schemes, one EKF guess each",
     notebook_requires={"lateral": True},
     parameters=[
-        P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1, ... (toy and "
+        P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1 and so on (toy and "
           "lateral); record seed is the one illustrated", minimum=0),
         P("toy_x1", -0.4, "float", "true x1 of Eq. (18), 1"),
         P("toy_x2", 0.5, "float", "true x2 of Eq. (18), 1"),
@@ -75,7 +83,8 @@ SPEC = ChapterSpec(
         P("dt_s", 0.001, "float", "filter sample time, s", positive=True),
         P("truth_substeps", 10, "int", "truth steps per filter step (truth dt = dt_s / this)",
           minimum=1),
-        P("spectrum", "german-low", "str", "alignment irregularity spectrum (railpaper.track)"),
+        P("spectrum", "german-low", "str", "alignment irregularity spectrum: fra-1 to fra-6, "
+          "german-low, german-high or china-hsr"),
         P("wavelength_min_m", 1.0, "float", "shortest irregularity wavelength, m", positive=True),
         P("wavelength_max_m", 100.0, "float", "longest irregularity wavelength, m", positive=True),
         P("noise_acc_wheelset_mps2", 0.1, "float", "wheelset accelerometer noise std, m/s^2",
@@ -130,12 +139,15 @@ def steps_to_within(norm: np.ndarray, tol: float = WITHIN) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- Part 2: lateral
 def noise_std(p: dict) -> np.ndarray:
+    """Sensor noise std of the five channels (:data:`L.CHANNELS`): m/s², m/s², m/s², m/s², rad/s."""
     return np.array([p["noise_acc_wheelset_mps2"]] * 2 + [p["noise_acc_bogie_mps2"],
                     p["noise_acc_body_mps2"], p["noise_yawrate_radps"]])
 
 
-def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> dict:
-    """Truth at dt_s / truth_substeps, measurements at dt_s (+ noise), filter inputs u_k."""
+def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+    """One record: an alignment profile of ``spectrum`` (seed ``seed``), the vehicle simulated
+    exactly at ``dt_s / truth_substeps``, the five channels sampled at ``dt_s`` with white sensor
+    noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
     v = p["speed_kmh"] / 3.6
     dtf = p["dt_s"] / p["truth_substeps"]
     dur = p["n_steps"] * p["dt_s"]
@@ -153,7 +165,16 @@ def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> dict
     y = y + rng.standard_normal(y.shape) * noise_std(p)
     u = dq[0:-1:sub][:p["n_steps"]]                       # u_k = ẏt(t_{k-1}), held over the step
     du = np.diff(dq[::sub], axis=0)
-    return dict(y=y, u=u, du_var=du.var(axis=0), dq_var=dq.var(axis=0))
+    return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
+                         u_var_m2ps2=dq.var(axis=0))
+
+
+def lateral_record(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+    """The record of seed ``seed``: the user's file when ``measurements_csv`` is set (every
+    seed), else :func:`simulate_lateral`."""
+    if p["measurements_csv"]:
+        return read_measurements(p["measurements_csv"], p)
+    return simulate_lateral(p, fixed, theta, seed)
 
 
 def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
@@ -163,27 +184,43 @@ def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
     return Q, np.diag(noise_std(p) ** 2)
 
 
-def run_lateral_rbpf(p, fixed, theta, data, seed, scheme) -> np.ndarray:
-    """Normalised estimates θ̂/θ (K, 5) of one RBPF run."""
-    Q, R = filter_noise(fixed, theta, p, data["du_var"])
-    system = L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R)
+def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord):
+    """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
+    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`)."""
+    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
+    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R)
+
+
+def lateral_rbpf(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int,
+                 scheme: str) -> FilterRun:
+    """One RBPF run on a record: ``n_particles`` particles θ × U(``prior_low``, ``prior_high``)
+    per parameter (generator ``[seed, 11]``: both schemes start from the same particles), each
+    with a Kalman filter from X = 0; ``scheme="paper"`` (Steps 1–2.6, δ = ``paper_delta``) or
+    ``"working"`` (tempering, ESS-triggered resampling, moves of log-parameters)."""
     rng = np.random.default_rng([seed, 11])
     theta0 = theta * rng.uniform(p["prior_low"], p["prior_high"], (p["n_particles"], 5))
     opts = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
             dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
                  tempering_steps=p["tempering_steps"], log_mask=np.ones(5, bool)))
-    run = run_rbpf(system, data["y"], theta0, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
-                   rng, u=data["u"], **opts)
-    return run.theta_mean / theta
+    return run_rbpf(system, record.y, theta0, np.zeros(L.N_STATES),
+                    1e-10 * np.eye(L.N_STATES), rng, u=record.u_mps, **opts)
 
 
-def lateral_crlb(p, fixed, theta, data) -> dict:
+def run_lateral_rbpf(p, fixed, theta, record: LateralRecord, seed: int, scheme: str
+                     ) -> np.ndarray:
+    """Normalised estimates θ̂/θ (K, 5) of one RBPF run (:func:`lateral_rbpf`)."""
+    system = filter_system(p, fixed, theta, record)
+    return lateral_rbpf(p, system, record, theta, seed, scheme).theta_mean / theta
+
+
+def lateral_crlb(p, fixed, theta, record: LateralRecord) -> dict:
     """Relative CRLB after 350 and n_steps steps, input known / unknown (process noise)."""
     v = p["speed_kmh"] / 3.6
     out = {}
-    for label, var, u in (("known", data["du_var"], data["u"]), ("unknown", data["dq_var"], None)):
+    for label, var, u in (("known", record.du_var_m2ps2, record.u_mps),
+                          ("unknown", record.u_var_m2ps2, None)):
         Q, R = filter_noise(fixed, theta, p, var)
-        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R), theta, data["y"],
+        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R), theta, record.y,
                                   np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), u,
                                   checkpoints=(350, p["n_steps"]))
         for c, I in info.items():
@@ -191,19 +228,22 @@ def lateral_crlb(p, fixed, theta, data) -> dict:
     return out
 
 
-def lateral_ekf(p, fixed, theta, data, seed, guesses: int) -> list[np.ndarray]:
-    """Normalised EKF estimates (K, 5) from ``guesses`` guesses U(prior box) x θ (NaN rows if
-    the run diverged); K = min(ekf_steps, n_steps)."""
-    Q, R = filter_noise(fixed, theta, p, data["du_var"])
+def lateral_ekf(p, fixed, theta, record: LateralRecord, seed, guesses: int) -> list[np.ndarray]:
+    """Normalised EKF estimates (K, 5) from ``guesses`` guesses U(prior box) x θ (generator
+    ``[seed, 13]``; NaN rows if the run diverged); K = min(ekf_steps, n_steps).  Empty on
+    a user's record (``record.seed`` None): the chapter judges the EKF on simulated records only."""
+    if record.seed is None:
+        return []
+    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
     model = L.ekf_model(fixed, p["speed_kmh"] / 3.6, p["dt_s"])
     rng = np.random.default_rng([seed, 13])
     runs = []
     for _ in range(guesses):
         guess = theta * rng.uniform(p["prior_low"], p["prior_high"], 5)
         K = min(p["ekf_steps"], p["n_steps"])
-        r = run_augmented_ekf(model, data["y"][:K], guess, np.zeros(L.N_STATES),
+        r = run_augmented_ekf(model, record.y[:K], guess, np.zeros(L.N_STATES),
                               1e-10 * np.eye(L.N_STATES), (0.3 * theta) ** 2, Q, R,
-                              (1e-4 * theta) ** 2, u=data["u"][:K], divergence_bound=1e12)
+                              (1e-4 * theta) ** 2, u=record.u_mps[:K], divergence_bound=1e12)
         runs.append(r.theta / theta if not r.diverged else np.full_like(r.theta, np.nan))
     return runs
 
@@ -256,44 +296,51 @@ def critical_speeds(fixed: dict, theta: np.ndarray, p: dict, metrics: dict) -> p
     return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves})
 
 
-def run_lateral(p: dict, metrics: dict, timings: dict, data_out: dict, progress
-                ) -> pd.DataFrame:
-    """Part 2 (critical speed, RBPF on every record, CRLB and EKF) into the dicts; returns the
-    first record's time series."""
+def run_lateral(p: dict, metrics: dict, timings: dict, progress
+                ) -> tuple[LateralPart, pd.DataFrame]:
+    """Part 2: critical speed, both RBPF schemes and one EKF guess on every record (the first:
+    ``ekf_guesses`` and the CRLB); metrics and timings into the dicts. Returns the part and
+    the first record's time series."""
     fixed, theta = vehicle()
-    data_out["critical"] = critical_speeds(fixed, theta, p, metrics)
+    critical = critical_speeds(fixed, theta, p, metrics)
     user = bool(p["measurements_csv"])
     if user:
-        first = read_measurements(p["measurements_csv"], p)
-        p = dict(p, n_steps=len(first["y"]), n_records=1)
-    runs, ekf_first, spent = {"working": [], "paper": []}, [], {"working": 0.0, "paper": 0.0}
+        first = lateral_record(p, fixed, theta, p["seed"])
+        p = dict(p, n_steps=len(first.y), n_records=1)
+    runs, ekf_first, crlb, ekf_count = [], [], None, None
+    spent = {"working": 0.0, "paper": 0.0}
     for i in range(p["n_records"]):
         progress(0.1 + 0.8 * i / p["n_records"], f"lateral record {i}")
-        rec = first if user else simulate_lateral(p, fixed, theta, p["seed"] + i)
-        for scheme in runs:
+        seed = p["seed"] + i
+        rec = first if user else lateral_record(p, fixed, theta, seed)
+        norm = {}
+        for scheme in spent:
             t0 = time.perf_counter()
-            runs[scheme].append(run_lateral_rbpf(p, fixed, theta, rec, p["seed"] + i, scheme))
+            norm[scheme] = run_lateral_rbpf(p, fixed, theta, rec, seed, scheme)
             spent[scheme] += time.perf_counter() - t0
-        if user:
-            continue
-        if i == 0:
-            progress(0.15, "CRLB and EKF")
+        ekf = []
+        if not user:
+            if i == 0:
+                progress(0.15, "CRLB and EKF")
+                t0 = time.perf_counter()
+                crlb = lateral_crlb_metrics(p, fixed, theta, rec, metrics)
+                timings["crlb_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            lateral_crlb_metrics(p, fixed, theta, rec, metrics, data_out)
-            timings["crlb_s"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        ekf = lateral_ekf(p, fixed, theta, rec, p["seed"] + i, p["ekf_guesses"] if i == 0 else 1)
-        timings["ekf_lateral_s"] = timings.get("ekf_lateral_s", 0.0) + time.perf_counter() - t0
-        ekf_first.append(ekf_converged(ekf[0]))
-        if i == 0:
-            data_out["ekf"] = ekf
-            metrics["ekf_lateral_converged_count"] = int(sum(map(ekf_converged, ekf)))
-            if p["ekf_guesses"] == 10:
-                metrics["ekf_lateral_converged_of_10"] = metrics["ekf_lateral_converged_count"]
-    for scheme in runs:
+            ekf = lateral_ekf(p, fixed, theta, rec, seed, p["ekf_guesses"] if i == 0 else 1)
+            timings["ekf_lateral_s"] = (timings.get("ekf_lateral_s", 0.0)
+                                        + time.perf_counter() - t0)
+            ekf_first.append(ekf_converged(ekf[0]))
+            if i == 0:
+                ekf_count = int(sum(map(ekf_converged, ekf)))
+                metrics["ekf_lateral_converged_count"] = ekf_count
+                if p["ekf_guesses"] == 10:
+                    metrics["ekf_lateral_converged_of_10"] = ekf_count
+        runs.append(LateralRun(None if user else seed, norm["paper"], norm["working"],
+                               tuple(ekf)))
+    for scheme in spent:
         timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / p["n_records"]
-    for scheme, suffix in (("working", ""), ("paper", "_paper_scheme")):
-        norm = runs[scheme][0]                                  # the illustrated record
+    for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
+        norm = getattr(runs[0], field)                          # the illustrated record
         steps = steps_to_within(norm)
         metrics[f"steps_to_within_5pct_all{suffix}"] = (int(steps.max()) if np.all(steps > 0)
                                                         else -1)
@@ -302,20 +349,25 @@ def run_lateral(p: dict, metrics: dict, timings: dict, data_out: dict, progress
             metrics[f"final_relative_error_{name}{suffix}"] = float(norm[-1, j] - 1)
     # Rao-Blackwellisation (paper §4): the augmented state (16 + 5) vs what the particles sample
     metrics["rb_augmented_state_dim"] = L.N_STATES + theta.size
-    metrics["rb_particle_dim"] = int(runs["paper"][0].shape[1])
+    metrics["rb_particle_dim"] = int(runs[0].rbpf_paper_norm.shape[1])
+    t_s = np.arange(1, p["n_steps"] + 1) * p["dt_s"]
+    part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
+                       critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count)
     if not user:
-        for scheme, suffix in (("paper", "_paper_scheme"), ("working", "_working_scheme")):
-            metrics.update(mc.lateral_metrics(runs[scheme], suffix, start=350, tol=WITHIN))
+        for field, suffix in (("rbpf_paper_norm", "_paper_scheme"),
+                              ("rbpf_working_norm", "_working_scheme")):
+            metrics.update(mc.lateral_metrics(list(part.stack(field)), suffix, start=350,
+                                              tol=WITHIN))
         metrics.update(mc.rate(ekf_first).metrics("lateral_ekf_converge_rate"))
-    data_out["runs"] = runs
-    main, paper, names = runs["working"][0], runs["paper"][0], list(enumerate(L.PARAM_NAMES))
-    return pd.DataFrame({"t_s": np.arange(1, len(main) + 1) * p["dt_s"],
-                         **{f"{name}_norm": main[:, j] for j, name in names},
-                         **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
+    main, paper, names = runs[0].rbpf_working_norm, runs[0].rbpf_paper_norm, \
+        list(enumerate(L.PARAM_NAMES))
+    return part, pd.DataFrame({"t_s": t_s, **{f"{name}_norm": main[:, j] for j, name in names},
+                               **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
 
 
-def lateral_crlb_metrics(p, fixed, theta, rec, metrics: dict, data_out: dict) -> None:
-    """CRLB of the first record into ``metrics`` (crlb_rel_*) and ``data_out["crlb"]``."""
+def lateral_crlb_metrics(p, fixed, theta, rec: LateralRecord, metrics: dict) -> pd.DataFrame:
+    """CRLB of the first record into ``metrics`` (crlb_rel_*); returns the table of
+    :attr:`LateralPart.crlb`."""
     cr = lateral_crlb(p, fixed, theta, rec)
     rows = []
     for j, name in enumerate(L.PARAM_NAMES):
@@ -323,10 +375,10 @@ def lateral_crlb_metrics(p, fixed, theta, rec, metrics: dict, data_out: dict) ->
         metrics[f"crlb_rel_final_{name}"] = float(cr[("known", p["n_steps"])][j])
         metrics[f"crlb_rel_350_unknown_input_{name}"] = float(cr[("unknown", 350)][j])
         rows.append(dict(parameter=name, **{f"{a}_{c}": cr[(a, c)][j] for a, c in cr}))
-    data_out["crlb"] = pd.DataFrame(rows)
+    return pd.DataFrame(rows)
 
 
-def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
+def run(*, quick: bool = False, progress=None, **p) -> RbpfParameterEstimationResult:
     """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`), on one numba and one
     OpenBLAS thread (:func:`~railpaper.experiments.rbpf_parameter_estimation_io.one_thread`)."""
     progress = progress or no_progress
@@ -335,13 +387,13 @@ def run(*, quick: bool = False, progress=None, **p) -> ChapterResult:
         return _run(p, progress)
 
 
-def _run(p: dict, progress) -> ChapterResult:
-    metrics, timings, data_out = {}, {}, {}
+def _run(p: dict, progress) -> RbpfParameterEstimationResult:
+    metrics, timings = {}, {}
     progress(0.02, "toy")
     t0 = time.perf_counter()
     toy = run_toy(p)
     timings["toy_s"] = time.perf_counter() - t0
-    st = toy["stats"]
+    st = toy.records
     for ic in (1, 2):                                           # the illustrated record
         main = st[(st.seed == p["seed"]) & (st.init == ic)].iloc[0]
         metrics[f"toy_ekf_diverged_init{ic}"] = bool(main.ekf_diverged)
@@ -350,8 +402,8 @@ def _run(p: dict, progress) -> ChapterResult:
         metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] = float(
             main.rbpf_working_err_max)
     metrics.update(mc.toy_metrics(st))
-    data_out["toy_truth"], data_out["toy_stats"] = toy["truth"], st
-    ts = run_lateral(p, metrics, timings, data_out, progress) if p["lateral"] else None
+    lateral, ts = run_lateral(p, metrics, timings, progress) if p["lateral"] else (None, None)
     progress(1.0, "done")
-    return ChapterResult(metrics=metrics, timings=timings, timeseries=ts,
-                         extra_tables={"toy_timeseries": toy["table"]}, data=data_out)
+    return RbpfParameterEstimationResult(metrics=metrics, timings=timings, timeseries=ts,
+                                         extra_tables={"toy_timeseries": toy.table()},
+                                         toy=toy, lateral=lateral)

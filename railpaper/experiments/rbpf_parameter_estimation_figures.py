@@ -1,6 +1,6 @@
 """Figures of the rbpf-parameter-estimation chapter, each from a run's
-:class:`~railpaper.experiments.base.ChapterResult` and resolved parameters; 7 in wide, legends
-outside the data, display names."""
+:class:`~railpaper.experiments.rbpf_parameter_estimation_result.RbpfParameterEstimationResult` and
+resolved parameters; 7 in wide, legends outside the data, display names."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from railpaper.experiments.rbpf_parameter_estimation_tables import PARAM_LABELS
 from railpaper.models.lateral_16state import PARAM_NAMES
 
 #: Display names and line styles of the three toy filters.
-TOY_FILTERS = {"rbpf": ("RBPF, paper scheme", "-"), "rbpfworking": ("RBPF, our working scheme", "--"),
-               "ekf": ("augmented EKF", ":")}
+TOY_FILTERS = {"rbpf_paper": ("RBPF, paper scheme", "-"),
+               "rbpf_working": ("RBPF, our working scheme", "--"), "ekf": ("augmented EKF", ":")}
 #: Display names of the two RBPF schemes.
 SCHEMES = {"working": "our working scheme", "paper": "paper's scheme"}
 WINDOW_S = 0.35                                    # the paper's 350 steps at 1 ms
@@ -26,15 +26,17 @@ def _legend_below(fig, ax, ncol=3):
 def toy_estimates(result, params):
     """Eq. (18), one record: the estimates of x1..x4 by the three filters from both initial
     conditions, with the true values (paper Figs 2-5)."""
-    toy, truth = result.extra_tables["toy_timeseries"], result.data["toy_truth"]
+    toy = result.toy
+    step = np.arange(1, toy.steps + 1)
     fig, axes = plt.subplots(2, 2, figsize=(7, 6.4), sharex=True)
     for j, ax in enumerate(axes.flat):
         for ic, color in ((1, "C0"), (2, "C3")):
+            run = toy.illustrated[ic]
             for key, (label, ls) in TOY_FILTERS.items():
                 marks = dict(marker="o", ms=3, markevery=(10 * ic, 40)) if key == "ekf" else {}
-                ax.plot(toy.step, toy[f"x{j + 1}_{key}_init{ic}"], color=color, ls=ls, lw=1.2,
+                ax.plot(step, getattr(run, key)[:, j], color=color, ls=ls, lw=1.2,
                         label=f"{label}, initial condition {ic}", **marks)
-        ax.axhline(truth[j], color="k", lw=0.8, label="true value")
+        ax.axhline(toy.truth[j], color="k", lw=0.8, label="true value")
         ax.set(title=f"$x_{j + 1}$ (paper Fig. {j + 2})", ylabel=f"estimate of $x_{j + 1}$ (1)")
     for ax in axes[1]:
         ax.set_xlabel("step n")
@@ -46,7 +48,7 @@ def toy_estimates(result, params):
 def toy_errors(result, params):
     """Eq. (18), every record: final max |error| per filter and initial condition (log scale),
     and the settle steps of the EKF against the RBPF (paper scheme) from initial condition 1."""
-    st, K = result.data["toy_stats"], params["toy_steps"]
+    st, K = result.toy.records, result.toy.steps
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(7, 3.9), gridspec_kw={"width_ratios": [1.5, 1]})
     cols = [("rbpf_err_max", "RBPF\npaper"), ("rbpf_working_err_max", "RBPF\nours"),
             ("ekf_err_max", "EKF")]
@@ -71,7 +73,7 @@ def toy_errors(result, params):
 def critical_speed(result, params):
     """Least-damped eigenvalue's real part against speed for three readings of the 'half'
     masses, with the test speed."""
-    crit, m = result.data["critical"], result.metrics
+    crit, m = result.lateral.critical_speed, result.metrics
     names = {"chosen": "our reading (only the body halved)",
              "all_halved": "wheelset and bogie masses halved too",
              "wheelset_bogie_doubled": "wheelset and bogie masses doubled"}
@@ -91,11 +93,11 @@ def critical_speed(result, params):
 def normalised_estimates(result, params):
     """Top: one record's normalised estimates with the range over records, per scheme. Bottom:
     every record's largest relative error (log), with the 0-0.35 s window shaded."""
-    runs, t = result.data["runs"], result.timeseries.t_s.to_numpy()
+    lateral, t = result.lateral, result.lateral.t_s
     fig, axes = plt.subplots(2, 2, figsize=(7, 7), sharex=True, sharey="row")
     for col, scheme in enumerate(("working", "paper")):
         ax, ax_err = axes[0, col], axes[1, col]
-        stack = np.array(runs[scheme])                              # (records, K, 5)
+        stack = lateral.stack(f"rbpf_{scheme}_norm")                # (records, K, 5)
         for j, name in enumerate(PARAM_NAMES):
             ax.plot(t, stack[0, :, j], color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
             ax.fill_between(t, stack[:, :, j].min(0), stack[:, :, j].max(0), color=f"C{j}",
@@ -119,11 +121,12 @@ def normalised_estimates(result, params):
 def relative_errors(result, params):
     """One record (working scheme): |estimate/true - 1| per parameter (log) with the CRLB std
     after 350 steps (dotted) where the true values are known."""
-    m, t, main = result.metrics, result.timeseries.t_s.to_numpy(), result.data["runs"]["working"][0]
+    m, t = result.metrics, result.lateral.t_s
+    main = result.lateral.illustrated.rbpf_working_norm
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for j, name in enumerate(PARAM_NAMES):
         ax.plot(t, np.abs(main[:, j] - 1), color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
-        if "crlb" in result.data:
+        if result.lateral.crlb is not None:
             ax.axhline(m[f"crlb_rel_350_{name}"], color=f"C{j}", ls=":", lw=1)
     ax.axhline(0.05, color="k", lw=1, label="5 %")
     ax.axvline(WINDOW_S, color="k", ls=":", lw=1)
@@ -136,14 +139,16 @@ def relative_errors(result, params):
 def final_errors_over_records(result, params):
     """Every record's final relative error per parameter (dots) and the mean with its 95 % t
     interval (bars), per scheme."""
-    m, runs = result.metrics, result.data["runs"]
+    m, lateral = result.metrics, result.lateral
     fig, axes = plt.subplots(1, 2, figsize=(7, 3.8), sharey=True)
     for ax, (scheme, suffix) in zip(axes, (("paper", "_paper_scheme"),
                                            ("working", "_working_scheme"))):
-        finals = np.array([r[-1] - 1 for r in runs[scheme]])
+        finals = lateral.stack(f"rbpf_{scheme}_norm")[:, -1] - 1
         for j, name in enumerate(PARAM_NAMES):
             ax.scatter(np.full(len(finals), j) + np.linspace(-0.2, 0.2, len(finals)),
                        finals[:, j], s=9, color=f"C{j}", alpha=0.7)
+            if f"lateral_bias_{name}{suffix}" not in m:             # a user's single record
+                continue
             mean, lo, hi = (m[f"lateral_bias_{name}{suffix}{s}"] for s in ("", "_low", "_high"))
             ax.errorbar(j + 0.3, mean, [[mean - lo], [hi - mean]], fmt="o", ms=4, color="k",
                         capsize=3)
@@ -158,7 +163,7 @@ def final_errors_over_records(result, params):
 def ekf_lateral(result, params):
     """The augmented EKF on one record from every initial guess: normalised estimates."""
     fig, ax = plt.subplots(figsize=(7, 3.8))
-    for i, r in enumerate(result.data.get("ekf", [])):
+    for i, r in enumerate(result.lateral.illustrated.ekf_norm):
         for j, name in enumerate(PARAM_NAMES):
             ax.plot(np.arange(1, len(r) + 1) * params["dt_s"], r[:, j], color=f"C{j}", lw=0.7,
                     label=PARAM_LABELS[name] if i == 0 else None)

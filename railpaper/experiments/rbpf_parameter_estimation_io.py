@@ -9,14 +9,16 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.base import ParameterError
+from railpaper.experiments.rbpf_parameter_estimation_result import LateralRecord
 from railpaper.models import lateral_16state as L
 
 CSV_INPUT = ("ydot_t1_mps", "ydot_t2_mps")
 
 
-def read_measurements(path: str, p: dict) -> dict:
+def read_measurements(path: str, p: dict) -> LateralRecord:
     """A user's record: columns ``t_s`` and :data:`L.CHANNELS` (SI units), optionally the track
-    lateral velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s``."""
+    lateral velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s``.  Without
+    the track velocities the filters' process noise assumes input changes of 0.04 m/s std."""
     try:
         frame = pd.read_csv(path)
     except (OSError, ValueError) as exc:
@@ -44,8 +46,8 @@ def read_measurements(path: str, p: dict) -> dict:
     u = arr[:, 6:8] if has_u else None
     y = arr[:, 1:6]
     u_var = np.var(np.diff(u, axis=0), axis=0) if has_u else np.full(2, 0.04 ** 2)
-    return dict(y=y, u=None if u is None else np.vstack([u[:1], u[:-1]]), du_var=u_var,
-                dq_var=u_var)
+    return LateralRecord(seed=None, y=y, u_mps=None if u is None else np.vstack([u[:1], u[:-1]]),
+                         du_var_m2ps2=u_var, u_var_m2ps2=u_var)
 
 
 # ----------------------------------------------------------------------------- threads
