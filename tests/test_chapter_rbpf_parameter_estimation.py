@@ -209,3 +209,48 @@ def test_user_record_input_is_held_one_step(tmp_path):
     np.testing.assert_array_equal(rec.u_mps[0], [u1[0], u2[0]])
     np.testing.assert_allclose(rec.du_var_m2ps2, [np.var(np.diff(u1)), np.var(np.diff(u2))],
                                rtol=1e-12)
+
+
+def test_page_structure(quick_result):
+    """Issue 14's page from the notebook source: title = SPEC.title, claims glued once at the
+    top, rules in the claims section at the end, every figure numbered and referenced, every
+    glued name glued, plumbing hidden, short visible cells, no developer words."""
+    import json
+    import re
+
+    from railpaper.experiments.rbpf_parameter_estimation_tables import caption_values
+    from railpaper.pipeline.chapters import BOOK_DIR
+
+    cells = json.loads((BOOK_DIR / "notebooks" / chapter.SPEC.notebook).read_text())["cells"]
+    src = ["".join(c["source"]) for c in cells]
+    tags = [set(c.get("metadata", {}).get("tags", [])) for c in cells]
+    text = "".join(s for s, c in zip(src, cells) if c["cell_type"] == "markdown")
+    assert src[0].splitlines()[0] == f"# {chapter.SPEC.title}"
+    assert text.count("{glue:md} claims_table") == 1 == "".join(src[:6]).count("claims_table")
+    label = next(i for i, s in enumerate(src) if "(claims-rbpf-parameter-estimation)=" in s)
+    assert label > len(cells) // 2 and "chapter_rules(CHAPTER)" in src[label + 1]
+    for word in ("paper 003", "claims.toml", "railpaper.pipeline", "shared/papers", "data/",
+                 "…", "errata.csv", "parameters.toml"):
+        assert word not in text, word
+    names = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-rbpf-[\w-]+)", text)
+    assert len(names) == 7 and len({n for _, n in names}) == 7
+    for png, name in names:
+        assert f"{{numref}}`{name}`" in text
+        assert f'save_figure(fig, out_dir, "{png}")' in "".join(src)
+    assert not re.search(r"(figure|plot)s? (above|below)", text)
+    glued = set(re.findall(r"\{glue:md\}`(\w+)`", text))     # every inline name is glued
+    assert len(glued) > 15 and glued <= set(caption_values(quick_result[1], quick_result[0]))
+    hidden = {"remove-cell", "remove-input", "hide-input", "parameters"}
+    visible = [s for s, t, c in zip(src, tags, cells)
+               if c["cell_type"] == "code" and not t & hidden]
+    assert len(visible) >= 7
+    for s, t, c in zip(src, tags, cells):
+        if c["cell_type"] != "code" or "parameters" in t:
+            continue
+        assert "result.data" not in s and len(s.splitlines()) <= 25, s
+        if re.search(r"save_figure\(|write_outputs\(|glue\(", s):
+            assert {"remove-input", "remove-cell"} & t, s
+    for s in visible:
+        assert max(map(len, s.splitlines())) <= 72, s
+        for name in ("overrides", "out_dir", "quick"):
+            assert not re.search(rf"\b{name}\b", s), (name, s)

@@ -54,10 +54,20 @@ def evidence_markdown(metrics: dict, names: dict[str, str]) -> str:
                                                 "records"]))
 
 
+#: Symbols of the vehicle's quantities as the paper writes them (Markdown math).
+SYMBOLS = {"mw": "$m_w$", "iwz": "$I_{wz}$", "mb": "$m_b$", "ib": "$I_b$", "mbd": "$m_{bd}$",
+           "kpx": "$K_{px}$", "a": "$a$", "b": "$b$", "lbw": "$L_{bw}$", "l0": "$l_0$",
+           "r0": "$r_0$", "f11": "$f_{11}$", "f22": "$f_{22}$", **PARAM_LABELS}
+
+
 def quantities_markdown(quantities: dict) -> str:
-    """The vehicle's quantities (name -> Quantity with value, unit, source) as a Markdown table."""
-    rows = [(f"`{k}`", number(v.value), v.unit, v.source) for k, v in quantities.items()]
-    return markdown(pd.DataFrame(rows, columns=["quantity", "value", "unit", "source"]))
+    """The vehicle's quantities (name -> Quantity with value, unit, source) as a Markdown table,
+    each named by its symbol."""
+    def unit(text: str) -> str:                               # kg*m^2 -> kg m²
+        return text.replace("*", " ").replace("^2", "²")
+    rows = [(SYMBOLS.get(k, f"`{k}`"), number(v.value), unit(v.unit), v.source)
+            for k, v in quantities.items()]
+    return markdown(pd.DataFrame(rows, columns=["symbol", "value", "unit", "source"]))
 
 
 def crlb_markdown(crlb: pd.DataFrame | None, normalised: np.ndarray, steps: int = 350) -> str:
@@ -119,7 +129,8 @@ def caption_values(result, params: dict) -> dict[str, str]:
     toy, lat, m = result.toy, result.lateral, result.metrics
     out = {"seed": str(params["seed"]), "toy_records": str(params["toy_seeds"]),
            "toy_steps": str(toy.steps), "toy_never": str(toy.steps + 1),
-           "toy_tol": number(params["toy_bias_tol"]), "speed": f"{number(params['speed_kmh'])} km/h",
+           "toy_tol": number(params["toy_bias_tol"]),
+           "speed": f"{number(params['speed_kmh'])} km/h",
            "prior_box": f"{number(params['prior_low'])}–{number(params['prior_high'])}"}
     one = toy.records[toy.records.seed == toy.seed].set_index("init")
     for ic in (1, 2):
@@ -154,5 +165,6 @@ def text_markdown(frame: pd.DataFrame) -> str:
     return markdown(frame.fillna("").astype(str))
 
 
-__all__ = ["LATERAL_EVIDENCE", "PARAM_LABELS", "PARAM_WORDS", "TOY_EVIDENCE", "caption_values", "crlb_markdown", "evidence_markdown",
-           "final_estimates_markdown", "quantities_markdown", "text_markdown"]
+__all__ = ["LATERAL_EVIDENCE", "PARAM_LABELS", "PARAM_WORDS", "SYMBOLS", "TOY_EVIDENCE",
+           "caption_values", "crlb_markdown", "evidence_markdown", "final_estimates_markdown",
+           "quantities_markdown", "text_markdown"]
