@@ -8,29 +8,42 @@ Every number is measured in this process on the same simulated record (the chapt
   predict / Joseph update (``engine="numpy"``);
 * ``filterpy``: :class:`benchmarks.filterpy_rbpf.FilterpyRBPF`, one filterpy filter per particle.
 
-Speed-ups compare the same steps of the same record with the same seed; the estimates of the
-baselines are compared with ours (``max_rel_theta_diff``).
+How it is measured (:mod:`benchmarks.timing`): filters that are compared are timed interleaved,
+A B C A B C …, :data:`REPEATS` alternations, each a fresh filter on the same steps with the same
+seed; a rate is the median over the alternations with its min–max spread, a ratio the median of
+the per-alternation ratios with theirs.  The 1-minute load average is sampled before, between
+the blocks and after; :mod:`railpaper.pipeline.bench` prints no ratio from a run whose load
+exceeded the core count.  The estimates of the baselines are compared with ours
+(``max_rel_theta_diff``).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
 
 import numpy as np
 
+from benchmarks.filterpy_rbpf import FilterpyRBPF
+from benchmarks.timing import LoadLog, interleaved, paired_ratio, rates, summary
 from railpaper.discretise import zoh
-from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
 from railpaper.estimators.rbpf import RaoBlackwellisedPF
 from railpaper.experiments import rbpf_parameter_estimation as E
+from railpaper.linear_gaussian import LinearGaussianBatch
 from railpaper.models import lateral_16state as L
 
-from benchmarks.filterpy_rbpf import FilterpyRBPF
+REPEATS = 5                    # alternations of every interleaved comparison
+FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
+MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
+
+
+def _record_field(data, key: str, attribute: str):
+    """A field of the chapter's simulated record (a dict, or a record object)."""
+    return data[key] if isinstance(data, dict) else getattr(data, attribute)
 
 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
@@ -38,7 +51,7 @@ def lateral_problem(n_steps: int, seed: int = 0) -> dict:
     p = dict(E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False))
     fixed, theta = E.vehicle()
     data = E.simulate_lateral(p, fixed, theta, seed)
-    Q, R = E.filter_noise(fixed, theta, p, data["du_var"])
+    Q, R = E.filter_noise(fixed, theta, p, _record_field(data, "du_var", "du_var_m2ps2"))
     v = p["speed_kmh"] / 3.6
     A0, Ak = L.affine_terms(fixed, v)
     fast = L.lateral_system(fixed, v, p["dt_s"], Q, R)
@@ -48,7 +61,8 @@ def lateral_problem(n_steps: int, seed: int = 0) -> dict:
         F, G = zoh(A, L.input_matrix(), p["dt_s"])
         return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
 
-    return dict(p=p, theta=theta, y=data["y"], u=data["u"], Q=Q, R=R, A0=A0, Ak=Ak,
+    return dict(p=p, theta=theta, y=_record_field(data, "y", "y"),
+                u=_record_field(data, "u", "u_mps"), Q=Q, R=R, A0=A0, Ak=Ak,
                 systems={"compiled": fast, "numpy": textbook})
 
 
@@ -101,6 +115,22 @@ def time_filter(prob: dict, kind: str, N: int, n_steps: int, per_step: bool = Fa
     return (time.perf_counter() - t0) / n_steps, est
 
 
+def working_timeline(prob: dict, N: int, skip: int, steps: int) -> tuple[float, float, int]:
+    """One working-scheme run at N: seconds per step over steps 1..FIRST_STEPS, over steps
+    skip+1..skip+steps (settled; the steps between run untimed), and the resamplings among
+    steps 1..FIRST_STEPS."""
+    filt = make_filter(prob, "rbpf-working", N)
+    Y, U = prob["y"], prob["u"]
+    t0 = time.perf_counter()
+    outputs = filt.steps(Y[:FIRST_STEPS], U[:FIRST_STEPS])
+    first = (time.perf_counter() - t0) / FIRST_STEPS
+    filt.steps(Y[FIRST_STEPS:skip], U[FIRST_STEPS:skip])
+    t0 = time.perf_counter()
+    filt.steps(Y[skip:skip + steps], U[skip:skip + steps])
+    settled = (time.perf_counter() - t0) / steps
+    return first, settled, int(sum(o["resampled"] for o in outputs))
+
+
 def profile_step(prob: dict, N: int, repeats: int) -> dict:
     """Milliseconds of a paper-scheme step at N, from ``repeats`` real steps in a warm loop: the
     Kalman bank, the new matrices of the moved particles (A(θ), ZOH, H(θ): the ``system`` call),
@@ -139,6 +169,27 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
                     (float(v) for v in medians)))
 
 
+def gain_settling(prob: dict, steps: int = 3000) -> dict:
+    """How fast one particle's Kalman gain settles (nominal θ, the benchmark's P0 = 1e-10 I):
+    the relative change ‖K_k − K_{k−1}‖/‖K_k‖ after FIRST_STEPS and ``steps`` steps, and the
+    largest |λ| of the closed loop (I − K H) F below 1 − 1e-6 (the unit modes are the integrators
+    d_j − y_wj the measurements do not see)."""
+    s = prob["systems"]["numpy"](prob["theta"][None])
+    F, H, Q, R = s.F[0], s.H[0], s.Q, s.R
+    P, K_old, change = 1e-10 * np.eye(L.N_STATES), None, {}
+    for k in range(1, steps + 1):
+        P = F @ P @ F.T + Q
+        K = np.linalg.solve(H @ P @ H.T + R, H @ P).T
+        I_KH = np.eye(L.N_STATES) - K @ H
+        P = I_KH @ P @ I_KH.T + K @ R @ K.T
+        if k in (FIRST_STEPS, steps):
+            change[k] = float(np.linalg.norm(K - K_old) / np.linalg.norm(K))
+        K_old = K
+    lam = np.abs(np.linalg.eigvals(I_KH @ F))
+    return dict(gain_change_after_first=change[FIRST_STEPS], gain_change_after=change[steps],
+                steps=steps, slowest_observable_abs_eig=float(lam[lam < 1 - 1e-6].max()))
+
+
 def _peak_rss_mb(N: int, n_steps: int) -> float:
     """Peak resident memory (MB) of a fresh process while it runs the paper-scheme RBPF at N.
 
@@ -168,6 +219,8 @@ def peak_memory_mb(N: int, n_steps: int) -> dict:
 
 
 def machine() -> dict:
+    import platform
+
     import numba
     cfg = np.show_config(mode="dicts")
     blas = cfg.get("Build Dependencies", {}).get("blas", {})
@@ -181,9 +234,16 @@ def machine() -> dict:
                 numba=numba.__version__, numba_threads=numba.get_num_threads())
 
 
-def main_payload(quick: bool, progress=print) -> dict:
+def _row(kind: str, engine: str, N: int, steps: int, seconds: list[float], **extra) -> dict:
+    s = summary(rates(seconds))
+    return dict(problem="lateral-16", filter=kind, engine=engine, N=N, steps=steps,
+                steps_per_s=s["median"], steps_per_s_min=s["min"], steps_per_s_max=s["max"],
+                repeats=len(seconds), us_per_particle_step=1e6 / s["median"] / N, **extra)
+
+
+def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
     """Run the whole benchmark; returns the JSON payload (see railpaper.pipeline.bench)."""
-    load_before = os.getloadavg()
+    loads = LoadLog()
     sizes = dict(working=200 if quick else 1000, paper=40 if quick else 200,
                  fp_working=30 if quick else 150, fp_paper=6 if quick else 25)
     steady = dict(skip=1000 if quick else 2000, steps=200 if quick else 1000)
@@ -191,61 +251,100 @@ def main_payload(quick: bool, progress=print) -> dict:
     progress("railpaper bench: compiling kernels")
     time_filter(prob, "rbpf-paper", 70, 3)
     time_filter(prob, "qgrbpf", 70, 3)
-    rows = []
+    loads.sample("start")
+    rows, spread, ratios = [], {}, {}
     Ns = (100, 1000, 10000) if quick else (100, 300, 1000, 3000, 10000)
     for N in Ns:
         scale = max(1, N // 1000)
-        for kind, k in (("rbpf-working", "working"), ("rbpf-paper", "paper"), ("qgrbpf", "paper")):
-            steps = max(5, sizes[k] // scale)
-            progress(f"railpaper bench: {kind} N={N}, {steps} steps")
-            dt, _ = time_filter(prob, kind, N, steps)
-            rows.append(dict(problem="lateral-16", filter=kind, engine="compiled", N=N,
-                             steps=steps, steps_per_s=1 / dt, us_per_particle_step=dt / N * 1e6))
+        steps = {k: max(5, sizes[k] // scale) for k in ("working", "paper")}
+        runs = {"rbpf-working": lambda: time_filter(prob, "rbpf-working", N, steps["working"])[0],
+                "rbpf-paper": lambda: time_filter(prob, "rbpf-paper", N, steps["paper"])[0],
+                "qgrbpf": lambda: time_filter(prob, "qgrbpf", N, steps["paper"])[0]}
+        if N == 1000:
+            runs["step()"] = lambda: time_filter(prob, "rbpf-working", N, sizes["working"],
+                                                 per_step=True)[0]
+        progress(f"railpaper bench: N={N}, {' / '.join(runs)} interleaved x {repeats}")
+        t = interleaved(runs, repeats)
+        loads.sample(f"N={N}")
+        for kind in ("rbpf-working", "rbpf-paper", "qgrbpf"):
+            rows.append(_row(kind, "compiled", N, steps["paper" if kind != "rbpf-working"
+                                                          else "working"], t[kind]))
+        r = paired_ratio(t["qgrbpf"], t["rbpf-paper"])
+        ratios[f"time_ratio_qgrbpf_over_rbpf_N{N}"] = r["median"]
+        spread[f"time_ratio_qgrbpf_over_rbpf_N{N}"] = [r["min"], r["max"]]
+        if N == 1000:
+            rows.append(_row("rbpf-working", "compiled, step()", N, sizes["working"],
+                             t["step()"]))
     N = 1000
-    progress(f"railpaper bench: rbpf-working, one step() per measurement, N={N}")
-    dt_step, _ = time_filter(prob, "rbpf-working", N, sizes["working"], per_step=True)
-    rows.append(dict(problem="lateral-16", filter="rbpf-working", engine="compiled, step()",
-                     N=N, steps=sizes["working"], steps_per_s=1 / dt_step,
-                     us_per_particle_step=dt_step / N * 1e6))
-    progress(f"railpaper bench: rbpf-working N={N}, steps after {steady['skip']} (settled)")
-    dt_steady, _ = time_filter(prob, "rbpf-working", N, steady["steps"], skip=steady["skip"])
-    rows.append(dict(problem="lateral-16", filter="rbpf-working", engine="compiled, settled",
-                     N=N, steps=steady["steps"], steps_per_s=1 / dt_steady,
-                     us_per_particle_step=dt_steady / N * 1e6))
+    progress(f"railpaper bench: rbpf-working N={N}, steps 1-{FIRST_STEPS} and settled x {repeats}")
+    timeline = interleaved({"run": lambda: working_timeline(prob, N, **steady)}, repeats)["run"]
+    loads.sample("timeline")
+    first = [t[0] for t in timeline]
+    resamplings = sorted({t[2] for t in timeline})
+    rows.append(_row("rbpf-working", "compiled, settled", N, steady["steps"],
+                     [t[1] for t in timeline]))
     baselines = {}
     for kind, k in (("rbpf-working", "fp_working"), ("rbpf-paper", "fp_paper")):
         steps = sizes[k]
-        dt_ours, est_ours = time_filter(prob, kind, N, steps)
-        for engine in ("numpy", "filterpy"):
-            progress(f"railpaper bench: {kind}:{engine} N={N}, {steps} steps")
-            dt, est = time_filter(prob, f"{kind}:{engine}", N, steps)
-            diff = float(np.max(np.abs(est - est_ours) / np.abs(est_ours)))
-            rows.append(dict(problem="lateral-16", filter=kind, engine=engine, N=N, steps=steps,
-                             steps_per_s=1 / dt, us_per_particle_step=dt / N * 1e6,
-                             speedup_of_compiled=dt / dt_ours, max_rel_theta_diff=diff))
-            baselines[(kind, engine)] = dt / dt_ours
-    progress("railpaper bench: profile and peak memory")
-    prof = profile_step(prob, 1000, 5 if quick else 20)
-    mem = peak_memory_mb(10000, 3)
+        estimates = {}
 
-    def rate(kind, N):
-        return next(r["steps_per_s"] for r in rows
-                    if r["filter"] == kind and r["engine"] == "compiled" and r["N"] == N)
-    ratios = {f"time_ratio_qgrbpf_over_rbpf_N{N}": rate("rbpf-paper", N) / rate("qgrbpf", N)
-              for N in Ns}
+        def run(engine, kind=kind, steps=steps, estimates=estimates):
+            dt, est = time_filter(prob, kind if engine == "compiled" else f"{kind}:{engine}",
+                                  N, steps)
+            estimates.setdefault(engine, est)
+            return dt
+        progress(f"railpaper bench: {kind} N={N} compiled / numpy / filterpy interleaved "
+                 f"x {repeats}, {steps} steps")
+        t = interleaved({e: (lambda e=e: run(e)) for e in ("compiled", "numpy", "filterpy")},
+                        repeats)
+        loads.sample(f"baselines {kind}")
+        ours = estimates["compiled"]
+        for engine in ("numpy", "filterpy"):
+            r = paired_ratio(t[engine], t["compiled"])
+            diff = float(np.max(np.abs(estimates[engine] - ours) / np.abs(ours)))
+            rows.append(_row(kind, engine, N, steps, t[engine], speedup_of_compiled=r["median"],
+                             speedup_of_compiled_min=r["min"], speedup_of_compiled_max=r["max"],
+                             max_rel_theta_diff=diff))
+            baselines[(kind, engine)] = r
+    progress("railpaper bench: profile, gain settling and peak memory")
+    prof = profile_step(prob, 1000, 5 if quick else 20)
+    settling = gain_settling(prob)
+    mem = peak_memory_mb(10000, 3)
+    loads.sample("end")
+
+    def row(kind, engine="compiled", N=1000):
+        return next(r for r in rows if r["filter"] == kind and r["engine"] == engine
+                    and r["N"] == N)
+    first_rates = summary(rates(first))
+    headline = dict(
+        steps_per_s_rbpf_lateral_N1000=row("rbpf-working"),
+        steps_per_s_rbpf_lateral_N1000_paper_scheme=row("rbpf-paper"),
+        steps_per_s_rbpf_lateral_N1000_step_api=row("rbpf-working", "compiled, step()"),
+        steps_per_s_rbpf_lateral_N1000_settled=row("rbpf-working", "compiled, settled"),
+        steps_per_s_qgrbpf_lateral_N1000=row("qgrbpf"))
+    for key, r in headline.items():
+        headline[key], spread[key] = r["steps_per_s"], [r["steps_per_s_min"], r["steps_per_s_max"]]
+    speedups = dict(speedup_vs_filterpy_lateral_N1000=("rbpf-working", "filterpy"),
+                    speedup_vs_filterpy_lateral_N1000_paper_scheme=("rbpf-paper", "filterpy"),
+                    speedup_vs_numpy_lateral_N1000=("rbpf-working", "numpy"),
+                    speedup_vs_numpy_lateral_N1000_paper_scheme=("rbpf-paper", "numpy"))
+    for key, which in speedups.items():
+        speedups[key] = baselines[which]["median"]
+        spread[key] = [baselines[which]["min"], baselines[which]["max"]]
+    spread["steps_per_s_rbpf_lateral_N1000_first1000"] = [first_rates["min"], first_rates["max"]]
+    p = prob["p"]
     return dict(
-        steps_per_s_rbpf_lateral_N1000=rate("rbpf-working", 1000),
-        steps_per_s_rbpf_lateral_N1000_paper_scheme=rate("rbpf-paper", 1000),
-        steps_per_s_rbpf_lateral_N1000_step_api=1 / dt_step,
-        steps_per_s_rbpf_lateral_N1000_settled=1 / dt_steady, settled_window=steady,
-        steps_per_s_qgrbpf_lateral_N1000=rate("qgrbpf", 1000),
-        speedup_vs_filterpy_lateral_N1000=baselines[("rbpf-working", "filterpy")],
-        speedup_vs_filterpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "filterpy")],
-        speedup_vs_numpy_lateral_N1000=baselines[("rbpf-working", "numpy")],
-        speedup_vs_numpy_lateral_N1000_paper_scheme=baselines[("rbpf-paper", "numpy")],
-        **ratios, profile_N1000_ms=prof, memory_N10000=mem, quick=quick, sizes=sizes,
-        machine=dict(machine(), load_before=list(load_before), load_after=list(os.getloadavg())),
-        rows=rows)
+        **headline, settled_window=steady, **speedups, **ratios,
+        steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
+        resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
+        profile_N1000_ms=prof, memory_N10000=mem, quick=quick, sizes=sizes, repeats=repeats,
+        spread=spread, gain_settling=settling,
+        setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],
+                   speed_kmh=p["speed_kmh"], ess_fraction=p["ess_fraction"],
+                   tempering_steps=p["tempering_steps"], working_delta=p["working_delta"],
+                   paper_delta=p["paper_delta"], max_chunk=MAX_CHUNK, first_steps=FIRST_STEPS,
+                   particles=list(Ns), baseline_N=N),
+        machine=dict(machine(), **loads.as_dict()), rows=rows)
 
 
 if __name__ == "__main__":
