@@ -41,17 +41,12 @@ FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's star
 MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
 
 
-def _record_field(data, key: str, attribute: str):
-    """A field of the chapter's simulated record (a dict, or a record object)."""
-    return data[key] if isinstance(data, dict) else getattr(data, attribute)
-
-
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
     """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model."""
     p = dict(E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False))
     fixed, theta = E.vehicle()
     data = E.simulate_lateral(p, fixed, theta, seed)
-    Q, R = E.filter_noise(fixed, theta, p, _record_field(data, "du_var", "du_var_m2ps2"))
+    Q, R = E.filter_noise(fixed, theta, p, data.du_var_m2ps2)
     v = p["speed_kmh"] / 3.6
     A0, Ak = L.affine_terms(fixed, v)
     fast = L.lateral_system(fixed, v, p["dt_s"], Q, R)
@@ -61,8 +56,7 @@ def lateral_problem(n_steps: int, seed: int = 0) -> dict:
         F, G = zoh(A, L.input_matrix(), p["dt_s"])
         return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
 
-    return dict(p=p, theta=theta, y=_record_field(data, "y", "y"),
-                u=_record_field(data, "u", "u_mps"), Q=Q, R=R, A0=A0, Ak=Ak,
+    return dict(p=p, theta=theta, y=data.y, u=data.u_mps, Q=Q, R=R, A0=A0, Ak=Ak,
                 systems={"compiled": fast, "numpy": textbook})
 
 
