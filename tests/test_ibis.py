@@ -206,8 +206,9 @@ def sbc_coverage(**options) -> float:
 COVERAGE_BAND = (0.84, 0.96)
 
 
-def test_coverage_of_90_percent_intervals_is_90_percent():
-    assert COVERAGE_BAND[0] <= sbc_coverage() <= COVERAGE_BAND[1]
+@pytest.mark.parametrize("proposal", ["rw", "independent"])
+def test_coverage_of_90_percent_intervals_is_90_percent(proposal):
+    assert COVERAGE_BAND[0] <= sbc_coverage(proposal=proposal) <= COVERAGE_BAND[1]
 
 
 def test_broken_samplers_fail_a_check(monkeypatch):
