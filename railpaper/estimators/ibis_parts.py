@@ -70,7 +70,8 @@ def normalise_log_weight_columns(LW: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def jittered_cholesky(cov: np.ndarray, box_width: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of Σ, with a jitter of (1e-9 · box width)² added if Σ is singular."""
+    """Lower Cholesky factor of Σ; if Σ is singular (e.g. one distinct particle), of Σ plus the
+    smallest diagonal jitter (10⁻⁹, 10⁻⁸, … × box width)² that factorises."""
     jitter = 0.0
     for _ in range(8):
         try:
