@@ -41,11 +41,12 @@ from railpaper.experiments.base import check_banks
 from railpaper.experiments.quasi_gaussian_rbpf_evidence import (FILTERS, NO_THRESHOLD, PARAMS,
                                                           QGRBPF_READINGS, descriptive_metrics,
                                                           evidence_metrics)
+from railpaper.experiments.quasi_gaussian_rbpf_readings import run_readings
 from railpaper.experiments.quasi_gaussian_rbpf_result import (ComputingTime, OneRecord,
                                                         QuasiGaussianRBPFResult)
 from railpaper.experiments.quasi_gaussian_rbpf_timing import timing
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
-from railpaper.settling import settled_index
+from railpaper.settling import settled_index, settling_step_to_final
 
 P = Parameter
 SPEC = ChapterSpec(
@@ -106,6 +107,9 @@ SPEC = ChapterSpec(
           "(its RBPF converges at step 55, read to ±5): errors are also taken at this step "
           "(the last one if the record is shorter)",
           minimum=1),
+        P("readings_records", 100, "int", "records per reading of the readings study (the "
+          "exact posterior under five readings of the printed Q, R and P0, each read at five "
+          "figure horizons; 0 skips it)", quick=40, minimum=0),
         P("seed", 0, "int", "seed of records, initial particles and filters", minimum=0),
     ],
 )
@@ -200,8 +204,8 @@ def first_within(estimate: np.ndarray, truth: float, tolerance: float) -> int:
 
 def settling_step(estimate: np.ndarray, tolerance: float) -> int:
     """First step (1-based) from which the estimate stays within ``tolerance`` of its own final
-    value (what one reads off a plot as "converged")."""
-    return settled_index(np.abs(estimate - estimate[-1]) <= tolerance) + 1
+    value (what one reads off a plot as "converged"): :func:`railpaper.settling.settling_step_to_final`."""
+    return settling_step_to_final(estimate, tolerance)
 
 
 def replicate(p: dict, index: int) -> OneRecord:
@@ -360,11 +364,22 @@ def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
     timings, timing_table, timing_samples = (_timing(p, main.measurements, progress)
                                              if p["timing"] else ({}, None, None))
     timings["monte_carlo_seconds"] = mc_seconds
+    readings = None
+    if p["readings_records"] > 0:
+        start = time.perf_counter()
+        readings = run_readings(truth=(p["a_true"], p["b_true"]), lower=(p["a_min"], p["b_min"]),
+                                upper=(p["a_max"], p["b_max"]), n_records=p["readings_records"],
+                                grid_size=p["grid_size"], tolerance=p["tolerance_to_truth"],
+                                seed=p["seed"], progress=lambda m: progress(0.97, m))
+        metrics.update(readings.metrics())
+        timings["readings_seconds"] = time.perf_counter() - start
     progress(1.0, "done")
     return QuasiGaussianRBPFResult(
         metrics=metrics, timings=timings, timeseries=_timeseries(p, main),
         extra_tables=dict({"monte_carlo": mc_table},
+                          **({} if readings is None else {"readings": readings.table}),
                           **({} if timing_samples is None else {"timing_samples": timing_samples})),
         main=main, monte_carlo=mc_table,
         computing_time=(None if timing_table is None
-                        else ComputingTime(timing_table, timing_samples)))
+                        else ComputingTime(timing_table, timing_samples)),
+        readings=readings)

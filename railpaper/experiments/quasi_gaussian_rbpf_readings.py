@@ -72,20 +72,39 @@ class ReadingsStudy:
     errors: pd.DataFrame
     settling_steps: np.ndarray
 
+    def interval_gap(self, reading: str, par: str, step: int) -> float:
+        """:func:`interval_gap` of this study (steps)."""
+        return interval_gap(self.table, reading, par, step)
+
     def metrics(self) -> dict:
-        """``reading_<key>_settling_step_<p>_h<H>`` (+ ``_low``, ``_high``, ``_n``) and
+        """``reading_<key>_settling_step_<p>_h<H>`` (+ ``_low``, ``_high``, ``_n``),
+        ``reading_<key>_interval_gap_<p>_<rbpf|qgrbpf>`` (steps from the paper's step ± 5 to the
+        nearest interval; 0 = possible at some horizon) and
         ``reading_<key>_abs_error_<p>_step{4,<rbpf step>}``."""
         m = {}
         for row in self.table.itertuples():
             name = f"reading_{row.reading}_settling_step_{row.parameter}_h{row.horizon_steps}"
             m.update({name: row.settling_step, f"{name}_low": row.settling_step_low,
                       f"{name}_high": row.settling_step_high, f"{name}_n": row.n_records})
+        for reading in self.readings:
+            for (par, filt), step in PAPER_STEPS.items():
+                m[f"reading_{reading.key}_interval_gap_{par}_{filt}"] = self.interval_gap(
+                    reading.key, par, step)
         for row in self.errors.itertuples():
             step = PAPER_STEPS[(row.parameter, "rbpf")]
             m[f"reading_{row.reading}_abs_error_{row.parameter}_step4"] = row.abs_error_step4
             m[f"reading_{row.reading}_abs_error_{row.parameter}_step{step}"] = \
                 row.abs_error_rbpf_step
         return m
+
+
+def interval_gap(table: pd.DataFrame, reading: str, par: str, step: int) -> float:
+    """Steps between the paper's ``step ± 5`` and the nearest 95 % interval of the posterior's
+    median settling step over all horizons (0: some horizon's interval meets it)."""
+    rows = table[(table.reading == reading) & (table.parameter == par)]
+    low, high = max(step - 5, 1), step + 5
+    return float(min(max(0.0, r.settling_step_low - high, low - r.settling_step_high)
+                     for r in rows.itertuples()))
 
 
 def load_readings(path=READINGS_FILE) -> tuple[tuple[Reading, ...], tuple[int, ...]]:
@@ -144,8 +163,8 @@ def run_readings(*, truth=(-0.7, 1.5), lower=(-1.0, 1.0), upper=(0.4, 2.8), n_re
                 for lst, val in zip(abs_err[par], (abs(mean[3, j] - truth[j]),
                                                    abs(mean[k, j] - truth[j]), std[3, j], std[k, j])):
                     lst.append(val)
-            if progress is not None:
-                progress(f"readings: {reading.key} record {r + 1}/{n_records}")
+        if progress is not None:
+            progress(f"readings study: reading {i + 1}/{len(readings)} ({n_records} records)")
         for h, horizon in enumerate(horizons):
             for j, par in enumerate(PARAMS):
                 est = median_interval(steps[i, h, j])
@@ -200,3 +219,68 @@ def plot_readings(study: ReadingsStudy):
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=1,
                fontsize=8, frameon=False)
     return fig
+
+
+def _meets(row, low: float, high: float) -> bool:
+    """The row's 95 % interval of the settling step meets [low, high]."""
+    return row.settling_step_low <= high and row.settling_step_high >= low
+
+
+def possible_horizons(study: ReadingsStudy, reading: str, par: str, step: int) -> list[int]:
+    """Figure horizons (steps) at which the exact posterior's median settling step of ``par``
+    has a 95 % interval meeting ``step ± 5``: where a calibrated filter can show ``step``."""
+    rows = study.table[(study.table.reading == reading) & (study.table.parameter == par)]
+    return [int(r.horizon_steps) for r in rows.itertuples()
+            if _meets(r, max(step - 5, 1), step + 5)]
+
+
+def readings_table(study: ReadingsStudy) -> str:
+    """Markdown: per reading, the settling step of ``a`` at each horizon (median [95 %]) and the
+    posterior's |error| and std of ``a`` at step 55."""
+    head = ["reading", "Q, R variance", "P0 std"] + [
+        f"settling step of a, {h}-step figure" for h in study.horizons_steps] + [
+        "|error| of a at step 55 (median)", "posterior std of a at step 55 (median)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for reading in study.readings:
+        rows = study.table[(study.table.reading == reading.key) & (study.table.parameter == "a")]
+        err = study.errors[(study.errors.reading == reading.key)
+                           & (study.errors.parameter == "a")].iloc[0]
+        cells = [reading.label, f"{reading.q_var:.3g}, {reading.r_var:.3g}",
+                 f"{reading.p0_std:.3g}"]
+        cells += [f"{r.settling_step:g} [{r.settling_step_low:g}, {r.settling_step_high:g}]"
+                  for r in rows.itertuples()]
+        cells += [f"{err.abs_error_rbpf_step:.3g}", f"{err.std_rbpf_step:.3g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def readings_summary(study: ReadingsStudy) -> str:
+    """Markdown bullets, computed from the study: under which reading and figure horizon a
+    calibrated filter can show the RBPF's step 55 (a) / 53 (b) and the Q-GRBPF's step 4."""
+    out, both = [], []
+    for reading in study.readings:
+        rb = {par: possible_horizons(study, reading.key, par, PAPER_STEPS[(par, "rbpf")])
+              for par in PARAMS}
+        qg = {par: possible_horizons(study, reading.key, par, 4) for par in PARAMS}
+        rb_h = sorted(set(rb["a"]) & set(rb["b"]))
+        qg_h = sorted(set(qg["a"]) & set(qg["b"]))
+        both += sorted(set(rb_h) & set(qg_h))
+        can = ([f"the RBPF's steps 55 / 53 if the figures showed {_list(rb_h)} steps"]
+               if rb_h else []) + ([f"the Q-GRBPF's step 4 if the figures showed {_list(qg_h)} steps"]
+                                   if qg_h else [])
+        cannot = ([] if rb_h else ["the RBPF's steps 55 / 53"]) + (
+            [] if qg_h else ["the Q-GRBPF's step 4"])
+        text = "; ".join(([f"a calibrated filter can show {'; '.join(can)}"] if can else [])
+                         + ([f"no calibrated filter shows {' or '.join(cannot)}"]
+                            if cannot else []))
+        out.append(f"* **{reading.label}**: {text}.")
+    out.append("* " + ("Under no reading and no horizon can a calibrated filter show both the "
+                       "RBPF's and the Q-GRBPF's steps: one of the two filters does not follow "
+                       "the data." if not both else
+                       f"Both steps are possible together at horizons {_list(both)}."))
+    return "\n".join(out)
+
+
+def _list(values) -> str:
+    values = [str(v) for v in values]
+    return values[0] if len(values) == 1 else ", ".join(values[:-1]) + " or " + values[-1]

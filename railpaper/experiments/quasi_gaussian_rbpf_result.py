@@ -16,6 +16,7 @@ import pandas as pd
 from railpaper.estimators.grid_posterior import GridPosterior
 from railpaper.estimators.rbpf import FilterRun
 from railpaper.experiments.base import ChapterResult
+from railpaper.experiments.quasi_gaussian_rbpf_readings import ReadingsStudy
 
 
 @dataclass(frozen=True)
@@ -90,8 +91,13 @@ class QuasiGaussianRBPFResult(ChapterResult):
         final spread ratios (filter std / posterior std).
     computing_time : ComputingTime or None
         The computing times; None when ``timing`` is false.
+    readings : ReadingsStudy or None
+        The exact posterior's settling steps under each reading of the printed noise settings
+        and figure horizon (:mod:`~railpaper.experiments.quasi_gaussian_rbpf_readings`); None
+        when ``readings_records`` is 0.
     """
 
     main: OneRecord | None = None
     monte_carlo: pd.DataFrame = field(default_factory=pd.DataFrame)
     computing_time: ComputingTime | None = None
+    readings: ReadingsStudy | None = None
