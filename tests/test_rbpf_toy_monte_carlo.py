@@ -178,6 +178,11 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
             assert row.rbpf_err_max == e_paper[-1] and row.rbpf_working_err_max == e_working[-1]
             assert row.rbpf_converged == (e_paper[-1] <= 0.2)
             assert row.rbpf_settle == _settle_by_loop(e_paper, 0.2)
+            for j in range(4):                  # 90 % interval: final mean +- 1.645 sd
+                for key, run in (("rbpf", paper), ("rbpf_working", working)):
+                    inside = abs(run.theta_mean[-1, j] - truth[j]) <= 1.6448536269514722 * \
+                        run.theta_std[-1, j]
+                    assert row[f"{key}_covers_x{j + 1}"] == inside
             assert row.ekf_diverged == ekf.diverged
             if not ekf.diverged:
                 e_ekf = np.abs(ekf.theta - truth).max(axis=1)

@@ -168,6 +168,9 @@ class ChapterResult:
         Other CSV outputs (e.g. ``toy_timeseries``), written as ``<key>.csv``.
     data : dict
         Anything else the notebook plots (arrays, tables).
+    extra_files : dict of str to str
+        Other text outputs, written verbatim as the file named by the key (e.g.
+        ``toy_posterior.json``).
     """
 
     metrics: dict[str, float | int | bool]
@@ -175,6 +178,7 @@ class ChapterResult:
     timeseries: pd.DataFrame | None = None
     extra_tables: dict[str, pd.DataFrame] = field(default_factory=dict)
     data: dict[str, Any] = field(default_factory=dict)
+    extra_files: dict[str, str] = field(default_factory=dict)
 
 
 def check_metrics(metrics: dict[str, Any]) -> dict[str, float | int | bool]:

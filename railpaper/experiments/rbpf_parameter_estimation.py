@@ -38,87 +38,16 @@ from railpaper.estimators.crlb import crlb_std, fisher_information
 from railpaper.estimators.ekf import run_augmented_ekf
 from railpaper.estimators.rbpf import FilterRun, run_rbpf
 from railpaper.experiments import rbpf_parameter_estimation_mc as mc
-from railpaper.experiments.base import (ChapterSpec, Parameter, ParameterError, check_sample_time,
-                                        no_progress)
+from railpaper.experiments import rbpf_parameter_estimation_posterior as posterior
+from railpaper.experiments.base import ParameterError, check_sample_time, no_progress
 from railpaper.experiments.base import check_banks
 from railpaper.experiments.rbpf_parameter_estimation_io import one_thread, read_measurements
+from railpaper.experiments.rbpf_parameter_estimation_spec import SPEC
 from railpaper.experiments.rbpf_parameter_estimation_result import (
     LateralPart, LateralRecord, LateralRun, RbpfParameterEstimationResult)
 from railpaper.experiments.rbpf_parameter_estimation_toy import run_toy
 from railpaper.models import lateral_16state as L
 from railpaper.settling import settled_index
-
-P = Parameter
-SPEC = ChapterSpec(
-    name="rbpf-parameter-estimation",
-    title="RBPF versus EKF for suspension parameters of a high-speed train (Ding et al. 2014)",
-    paper="003_106973ea68498aa8.txt",
-    notebook="rbpf_parameter_estimation.ipynb",
-    quick_sizes="toy as full (40 records x 500 steps, 300 particles); lateral: 5 records "
-                "(full: 30) x 500 steps, 200 particles, both schemes, one EKF guess each",
-    notebook_requires={"lateral": True},
-    parameters=[
-        P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1 and so on (toy and "
-          "lateral); record seed is the one illustrated", minimum=0),
-        P("toy_x1", -0.4, "float", "true x1 of Eq. (18), 1"),
-        P("toy_x2", 0.5, "float", "true x2 of Eq. (18), 1"),
-        P("toy_x3", 0.5, "float", "true x3 of Eq. (18), 1"),
-        P("toy_x4", 1.0, "float", "true x4 of Eq. (18), 1"),
-        P("toy_noise_var", 0.1, "float", "variance of W and V in Eq. (18), 1", positive=True),
-        P("toy_steps", 500, "int", "measurements of each toy record", minimum=10),
-        P("toy_particles", 300, "int", "RBPF particles (toy)", minimum=2),
-        P("toy_seeds", 40, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
-          minimum=1),
-        P("toy_prior_halfwidth", 2.0, "float",
-          "RBPF prior: uniform on initial condition +- this, per parameter, 1", positive=True),
-        P("toy_tempering_steps", 50, "int", "toy working-scheme RBPF: tempering steps",
-          minimum=0),
-        P("toy_ekf_q_theta", 1e-6, "float", "EKF random-walk variance of each x_j per step, 1",
-          positive=True),
-        P("toy_bias_tol", 0.2, "float", "toy: a filter has converged when its final |error| is "
-          "at most this in every x_j (and, for 'faster', stays so), 1", positive=True),
-        P("speed_kmh", 300.0, "float", "vehicle speed, km/h", positive=True),
-        P("n_steps", 500, "int", "filter steps of each lateral record (at dt_s); the 350-step "
-          "claim is checked from step 350 to this", minimum=400),
-        P("dt_s", 0.001, "float", "filter sample time, s", positive=True),
-        P("truth_substeps", 10, "int", "truth steps per filter step (truth dt = dt_s / this)",
-          minimum=1),
-        P("spectrum", "german-low", "str", "alignment irregularity spectrum: fra-1 to fra-6, "
-          "german-low, german-high or china-hsr"),
-        P("wavelength_min_m", 1.0, "float", "shortest irregularity wavelength, m", positive=True),
-        P("wavelength_max_m", 100.0, "float", "longest irregularity wavelength, m", positive=True),
-        P("noise_acc_wheelset_mps2", 0.1, "float", "wheelset accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_acc_bogie_mps2", 0.1, "float", "bogie accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_acc_body_mps2", 0.01, "float", "car-body accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_yawrate_radps", 0.001, "float", "bogie yaw-rate gyro noise std, rad/s",
-          positive=True),
-        P("n_particles", 200, "int", "RBPF particles (lateral)", minimum=2),
-        P("prior_low", 0.5, "float", "prior box lower edge, fraction of the true value",
-          positive=True),
-        P("prior_high", 1.7, "float", "prior box upper edge, fraction of the true value",
-          positive=True),
-        P("paper_delta", 0.98, "float", "Liu-West delta of the paper scheme, 1", positive=True),
-        P("working_delta", 0.9, "float", "Liu-West delta of the working scheme, 1",
-          positive=True),
-        P("tempering_steps", 300, "int", "working scheme: likelihood tempering steps", minimum=0),
-        P("ess_fraction", 0.8, "float", "working scheme: resample when ESS < this N, 1",
-          positive=True),
-        P("n_records", 30, "int", "lateral records (Monte Carlo samples, < 1000), each filtered "
-          "by both RBPF schemes and one EKF guess", quick=5, minimum=2),
-        P("ekf_guesses", 10, "int", "initial parameter guesses of the lateral EKF on the "
-          "illustrated record (the others get one each)", minimum=1),
-        P("ekf_steps", 500, "int", "steps of each lateral EKF run (<= n_steps)", minimum=10),
-        P("measurements_csv", "", "str",
-          "user CSV (t_s, acc_w1_mps2, acc_w2_mps2, acc_b_mps2, acc_bd_mps2, yawrate_b_radps"
-          "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate",
-          path=True),
-        P("lateral", True, "bool", "run Part 2, the lateral vehicle (sweep samples of the toy "
-          "alone switch it off; the notebook needs it)"),
-    ],
-)
 
 WITHIN = 0.05
 
@@ -276,7 +205,12 @@ def validate(p: dict) -> None:
                       f"the lateral model at {p['speed_kmh']:g} km/h")
     check_banks([("toy_particles", p["toy_particles"], p["toy_particles"], 2, 10, "the toy RBPF"),
                  ("n_particles", p["n_particles"], p["n_particles"] * p["lateral"], L.N_STATES,
-                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF, F, H, G per particle")])
+                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF, F, H, G per particle"),
+                 ("ibis_particles", p["ibis_particles"], 2 * p["ibis_particles"] * p["lateral"],
+                  L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
+                  "the lateral IBIS sampler, particles and their proposals"),
+                 ("toy_ibis_particles", p["toy_ibis_particles"], 2 * p["toy_ibis_particles"], 2,
+                  10, "the toy IBIS sampler, particles and their proposals")])
     if p["measurements_csv"]:
         read_measurements(p["measurements_csv"], p)
 
@@ -299,25 +233,31 @@ def critical_speeds(fixed: dict, theta: np.ndarray, p: dict, metrics: dict) -> p
 def run_lateral(p: dict, metrics: dict, timings: dict, progress
                 ) -> tuple[LateralPart, pd.DataFrame]:
     """Part 2: critical speed, both RBPF schemes and one EKF guess on every record (the first:
-    ``ekf_guesses`` and the CRLB); metrics and timings into the dicts. Returns the part and
-    the first record's time series."""
+    ``ekf_guesses`` and the CRLB), the exact posterior (IBIS) on the first ``ibis_records``;
+    metrics and timings into the dicts. Returns the part and the first record's time series."""
     fixed, theta = vehicle()
     critical = critical_speeds(fixed, theta, p, metrics)
     user = bool(p["measurements_csv"])
     if user:
         first = lateral_record(p, fixed, theta, p["seed"])
         p = dict(p, n_steps=len(first.y), n_records=1)
+    n_ibis = min(p["ibis_records"], p["n_records"])
     runs, ekf_first, crlb, ekf_count = [], [], None, None
-    spent = {"working": 0.0, "paper": 0.0}
+    spent = {"working": 0.0, "paper": 0.0, "ibis": 0.0}
     for i in range(p["n_records"]):
         progress(0.1 + 0.8 * i / p["n_records"], f"lateral record {i}")
         seed = p["seed"] + i
         rec = first if user else lateral_record(p, fixed, theta, seed)
-        norm = {}
-        for scheme in spent:
+        system, fr = filter_system(p, fixed, theta, rec), {}
+        for scheme in ("working", "paper"):
             t0 = time.perf_counter()
-            norm[scheme] = run_lateral_rbpf(p, fixed, theta, rec, seed, scheme)
+            fr[scheme] = lateral_rbpf(p, system, rec, theta, seed, scheme)
             spent[scheme] += time.perf_counter() - t0
+        post = None
+        if i < n_ibis:
+            t0 = time.perf_counter()
+            post = posterior.lateral_posterior(p, system, rec, theta, seed)
+            spent["ibis"] += time.perf_counter() - t0
         ekf = []
         if not user:
             if i == 0:
@@ -335,10 +275,13 @@ def run_lateral(p: dict, metrics: dict, timings: dict, progress
                 metrics["ekf_lateral_converged_count"] = ekf_count
                 if p["ekf_guesses"] == 10:
                     metrics["ekf_lateral_converged_of_10"] = ekf_count
-        runs.append(LateralRun(None if user else seed, norm["paper"], norm["working"],
-                               tuple(ekf)))
-    for scheme in spent:
+        runs.append(LateralRun(None if user else seed, fr["paper"].theta_mean / theta,
+                               fr["working"].theta_mean / theta, tuple(ekf),
+                               fr["paper"].theta_std / theta, fr["working"].theta_std / theta,
+                               post))
+    for scheme in ("working", "paper"):
         timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / p["n_records"]
+    timings["ibis_lateral_per_run_s"] = spent["ibis"] / n_ibis
     for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
         norm = getattr(runs[0], field)                          # the illustrated record
         steps = steps_to_within(norm)
@@ -359,6 +302,7 @@ def run_lateral(p: dict, metrics: dict, timings: dict, progress
             metrics.update(mc.lateral_metrics(list(part.stack(field)), suffix, start=350,
                                               tol=WITHIN))
         metrics.update(mc.rate(ekf_first).metrics("lateral_ekf_converge_rate"))
+    metrics.update(posterior.lateral_metrics(part, simulated=not user))
     main, paper, names = runs[0].rbpf_working_norm, runs[0].rbpf_paper_norm, \
         list(enumerate(L.PARAM_NAMES))
     return part, pd.DataFrame({"t_s": t_s, **{f"{name}_norm": main[:, j] for j, name in names},
@@ -402,8 +346,23 @@ def _run(p: dict, progress) -> RbpfParameterEstimationResult:
         metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] = float(
             main.rbpf_working_err_max)
     metrics.update(mc.toy_metrics(st))
+    t0 = time.perf_counter()
+    toy = posterior.toy_posteriors(p, toy)                      # the exact posterior, toy
+    timings["ibis_toy_s"] = time.perf_counter() - t0
+    metrics.update(posterior.toy_metrics(toy))
     lateral, ts = run_lateral(p, metrics, timings, progress) if p["lateral"] else (None, None)
+    mismatch = None
+    if p["lateral"] and not p["measurements_csv"]:
+        from railpaper.experiments.rbpf_parameter_estimation_model_error import run_model_error
+        progress(0.9, "model error")
+        t0 = time.perf_counter()
+        mismatch, more = run_model_error(p, lateral)
+        metrics.update(more)
+        timings["mismatch_s"] = time.perf_counter() - t0
     progress(1.0, "done")
-    return RbpfParameterEstimationResult(metrics=metrics, timings=timings, timeseries=ts,
-                                         extra_tables={"toy_timeseries": toy.table()},
-                                         toy=toy, lateral=lateral)
+    return RbpfParameterEstimationResult(
+        metrics=metrics, timings=timings, timeseries=ts,
+        extra_tables={"toy_timeseries": toy.table(),
+                      "toy_record": posterior.toy_record_table(toy.record)},
+        extra_files={"toy_posterior.json": posterior.toy_posterior_json(p, toy.posterior)},
+        toy=toy, lateral=lateral, mismatch=mismatch)

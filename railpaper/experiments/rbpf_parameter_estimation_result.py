@@ -7,12 +7,18 @@ time series) plus :attr:`~RbpfParameterEstimationResult.toy` (:class:`ToyPart`) 
 :attr:`~RbpfParameterEstimationResult.lateral` (:class:`LateralPart`); the notebook reads their
 named fields.
 
-Extending: an estimator run on every lateral record (e.g. an exact posterior) is one more field
-of :class:`LateralRun` with a default of ``None`` (normalised estimates ``(K, 5)`` like the
-others, or its own frozen dataclass), filled where :func:`rbpf_parameter_estimation.run_lateral`
-builds the records; :meth:`LateralPart.stack` then serves it by field name, and statistics over
-records (coverage, rates) go into the run's metrics by
-:mod:`~railpaper.experiments.rbpf_parameter_estimation_mc`.
+The exact posterior (:class:`PosteriorRun`, by IBIS) sits beside the filters: per lateral record in
+:attr:`LateralRun.posterior` (the first ``ibis_records``), for the toy's illustrated record in
+:attr:`ToyPart.posterior` with the per-record calibration in :attr:`ToyPart.coverage`; the
+model-error study in :attr:`RbpfParameterEstimationResult.mismatch`.
+
+Extending: an estimator run on every lateral record is one more field of :class:`LateralRun` with
+a default of ``None`` (normalised estimates ``(K, 5)`` like the others, or its own frozen
+dataclass), filled where :func:`rbpf_parameter_estimation.run_lateral` builds the records;
+:meth:`LateralPart.stack` then serves it by field name (``"posterior.sd"``: a field of a field),
+and statistics over records (coverage, rates) go into the run's metrics by
+:mod:`~railpaper.experiments.rbpf_parameter_estimation_mc` and
+:mod:`~railpaper.experiments.rbpf_parameter_estimation_posterior`.
 """
 
 from __future__ import annotations
@@ -23,6 +29,48 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.base import ChapterResult
+
+
+# ----------------------------------------------------------------------------- exact posterior
+@dataclass(frozen=True)
+class PosteriorRun:
+    """The exact posterior of the static parameters after every step, by IBIS
+    (:func:`railpaper.estimators.ibis.run_ibis`: no artificial parameter noise, no tempering).
+
+    Attributes
+    ----------
+    mean, sd : ndarray, shape (K, d)
+        Posterior mean and standard deviation after y_1..y_k (row k − 1), in the unit of the
+        part: the toy's x_j (dimensionless) or the lateral θ divided by its true value (1).
+    q05, q95 : ndarray, shape (K, d)
+        5 % and 95 % posterior quantiles: the 90 % equal-tailed credible interval.
+    ess : ndarray, shape (K,)
+        Effective sample size of the sampler's weights at each step.
+    resample_steps : ndarray of int
+        Steps (1-based) after which the particles were resampled and moved.
+    particles : int
+        IBIS particles N.
+    filter_steps : int
+        Kalman filter steps the sampler ran in total (its cost).
+    """
+
+    mean: np.ndarray
+    sd: np.ndarray
+    q05: np.ndarray
+    q95: np.ndarray
+    ess: np.ndarray
+    resample_steps: np.ndarray
+    particles: int
+    filter_steps: int
+
+    @classmethod
+    def from_ibis(cls, run, scale=1.0) -> "PosteriorRun":
+        """Summaries of an :class:`~railpaper.estimators.ibis.IBISRun`, divided by ``scale``
+        (the true θ for the lateral model; 1 for the toy)."""
+        scale = np.asarray(scale, float)
+        return cls(mean=run.mean / scale, sd=run.sd / scale, q05=run.q05 / scale,
+                   q95=run.q95 / scale, ess=run.ess, resample_steps=run.resample_steps,
+                   particles=int(run.theta.shape[0]), filter_steps=int(run.n_filter_steps))
 
 
 # ----------------------------------------------------------------------------- Part 1: toy
@@ -47,6 +95,9 @@ class ToyRun:
         Whether the EKF diverged numerically (an estimate beyond ±1000).
     ekf_diverged_step : int
         First step (1-based) at which it diverged; −1 if it did not.
+    rbpf_paper_sd, rbpf_working_sd : ndarray, shape (K, 4)
+        Weighted standard deviation of each scheme's particles (the spread behind its
+        estimate), dimensionless.
     """
 
     initial_condition: int
@@ -56,6 +107,8 @@ class ToyRun:
     ekf: np.ndarray
     ekf_diverged: bool
     ekf_diverged_step: int
+    rbpf_paper_sd: np.ndarray | None = None
+    rbpf_working_sd: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -78,7 +131,17 @@ class ToyPart:
         ``ekf_err_max``; an EKF that diverged counts 1000), ``ekf_diverged``, ``ekf_converged``,
         ``rbpf_converged`` (final largest error <= ``toy_bias_tol``; the EKF also not diverged)
         and the settle steps ``rbpf_settle``, ``ekf_settle`` (first step from which the error
-        stays within ``toy_bias_tol``; K + 1 = never).
+        stays within ``toy_bias_tol``; K + 1 = never); ``rbpf_covers_x<j>``,
+        ``rbpf_working_covers_x<j>``: whether the scheme's final mean ± 1.645 sd holds the true
+        x_j (its 90 % interval, Gaussian reading of the particle spread).
+    record : Simulation or None
+        The illustrated record (``u`` (K, 1), ``y`` (K, 1)).
+    posterior : PosteriorRun or None
+        The exact posterior on the illustrated record (prior box of initial condition 1).
+    coverage : DataFrame or None
+        One row per (record, parameter) of the records the exact posterior was computed on:
+        ``seed``, ``parameter`` (x1..x4), ``truth``, ``posterior_q05``, ``posterior_q95``,
+        ``posterior_covers``, ``paper_covers``, ``tempered_covers`` (initial condition 1).
     """
 
     truth: np.ndarray
@@ -86,6 +149,9 @@ class ToyPart:
     seed: int
     illustrated: dict
     records: pd.DataFrame
+    record: object | None = None
+    posterior: PosteriorRun | None = None
+    coverage: pd.DataFrame | None = None
 
     def table(self) -> pd.DataFrame:
         """The illustrated record's estimates per step: column ``step`` (1..K), then
@@ -144,12 +210,20 @@ class LateralRun:
     ekf_norm : tuple of ndarray, each (K_ekf, 5)
         The augmented EKF from each initial guess (``ekf_guesses`` on the first record, one on
         the others; empty for a user's file); all NaN if that run diverged numerically.
+    rbpf_paper_sd_norm, rbpf_working_sd_norm : ndarray, shape (K, 5)
+        Weighted standard deviation of each scheme's particles divided by the true values (1).
+    posterior : PosteriorRun or None
+        The exact posterior (IBIS, normalised by the true values) on the first
+        ``ibis_records`` records; None on the others.
     """
 
     seed: int | None
     rbpf_paper_norm: np.ndarray
     rbpf_working_norm: np.ndarray
     ekf_norm: tuple = ()
+    rbpf_paper_sd_norm: np.ndarray | None = None
+    rbpf_working_sd_norm: np.ndarray | None = None
+    posterior: PosteriorRun | None = None
 
 
 @dataclass(frozen=True)
@@ -192,8 +266,16 @@ class LateralPart:
 
     def stack(self, estimator: str) -> np.ndarray:
         """Normalised estimates of every record, shape (records, K, 5), of the
-        :class:`LateralRun` field ``estimator`` (e.g. ``"rbpf_paper_norm"``)."""
-        return np.array([getattr(run, estimator) for run in self.runs])
+        :class:`LateralRun` field ``estimator`` (e.g. ``"rbpf_paper_norm"``); a dotted name
+        reads a field of that field (``"posterior.sd"``) on the records that have it."""
+        values = []
+        for run in self.runs:
+            value = run
+            for name in estimator.split("."):
+                value = None if value is None else getattr(value, name)
+            if value is not None:
+                values.append(value)
+        return np.array(values)
 
 
 @dataclass
@@ -207,11 +289,17 @@ class RbpfParameterEstimationResult(ChapterResult):
         Part 1, the toy of Eq. (18).
     lateral : LateralPart or None
         Part 2, the lateral vehicle (None when ``lateral`` is false: a sweep sample of the toy).
+    mismatch : MismatchResult or None
+        The EKF and our tempered RBPF on the truth plant with model error
+        (:func:`railpaper.experiments.rbpf_parameter_estimation_mismatch.run_mismatch`, the
+        first ``mismatch_records`` seeds, mismatch plant only: the matched records are Part 2's);
+        None without Part 2 or on a user's record.
     """
 
     toy: ToyPart | None = None
     lateral: LateralPart | None = None
+    mismatch: object | None = None
 
 
-__all__ = ["LateralPart", "LateralRecord", "LateralRun", "RbpfParameterEstimationResult",
-           "ToyPart", "ToyRun"]
+__all__ = ["LateralPart", "LateralRecord", "LateralRun", "PosteriorRun",
+           "RbpfParameterEstimationResult", "ToyPart", "ToyRun"]

@@ -20,6 +20,13 @@ from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simula
 
 TOY_INITS = {1: np.zeros(4), 2: np.array([-0.26, 1.0, 0.24, -0.5])}
 EKF_BOUND = 1e3       # |x_j| above this: the toy EKF has diverged; its error then counts as this
+Z90 = 1.6448536269514722    # standard normal 95 % quantile: mean ± Z90 sd is a 90 % interval
+
+
+def gaussian_covers(mean: np.ndarray, sd: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Whether ``mean ± Z90 sd`` (a particle filter's 90 % interval read as Gaussian) holds the
+    truth, per parameter (bool array of the broadcast shape)."""
+    return np.abs(np.asarray(truth) - np.asarray(mean)) <= Z90 * np.asarray(sd)
 
 
 def truth(p: dict) -> np.ndarray:
@@ -76,7 +83,7 @@ def filter_record(p: dict, sim: Simulation, ic: int, rng: np.random.Generator) -
     working = rbpf(p, model, sim, theta0, rng, "working")
     ek = ekf(p, sim, start)
     return ToyRun(ic, start, paper.theta_mean, working.theta_mean, ek.theta, ek.diverged,
-                  ek.diverged_step)
+                  ek.diverged_step, paper.theta_std, working.theta_std)
 
 
 def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
@@ -95,7 +102,11 @@ def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
                 ekf_diverged=run.ekf_diverged,
                 ekf_converged=not run.ekf_diverged and e_ek[-1] <= tol,
                 rbpf_converged=bool(e_rb[-1] <= tol),
-                rbpf_settle=mc.settle_step(e_rb, tol), ekf_settle=mc.settle_step(e_ek, tol))
+                rbpf_settle=mc.settle_step(e_rb, tol), ekf_settle=mc.settle_step(e_ek, tol),
+                **{f"{key}_covers_x{j + 1}": bool(c) for key, (mean, sd) in
+                   (("rbpf", (run.rbpf_paper, run.rbpf_paper_sd)),
+                    ("rbpf_working", (run.rbpf_working, run.rbpf_working_sd)))
+                   for j, c in enumerate(gaussian_covers(mean[-1], sd[-1], x))})
 
 
 def run_toy(p: dict) -> ToyPart:

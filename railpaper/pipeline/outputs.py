@@ -28,7 +28,8 @@ def _json_ready(value: Any) -> Any:
 
 def write_outputs(out_dir: str | Path, spec: ChapterSpec, parameters: dict, quick: bool,
                   result: ChapterResult) -> None:
-    """Write ``metrics.json``, ``timings.json``, ``timeseries.csv`` and extra tables into out_dir.
+    """Write ``metrics.json``, ``timings.json``, ``timeseries.csv``, extra tables and extra text
+    files (:attr:`ChapterResult.extra_files`, verbatim) into out_dir.
 
     ``metrics.json`` = ``{"chapter", "parameters", "quick", "metrics"}`` with keys sorted, so the
     same parameters and seed give a byte-identical file.  Floats in CSV files are written with
@@ -47,6 +48,8 @@ def write_outputs(out_dir: str | Path, spec: ChapterSpec, parameters: dict, quic
     for name, frame in tables.items():
         frame.to_csv(out / f"{name}.csv", index=False, float_format="%.17g",
                      quoting=csv.QUOTE_MINIMAL)
+    for name, text in result.extra_files.items():
+        (out / name).write_text(text)
 
 
 def save_figure(fig, out_dir: str | Path, name: str) -> Path:
