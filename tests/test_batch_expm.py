@@ -86,6 +86,14 @@ def balanced_blocks(A, B, dt, d):
     return M * d[None, None, :] / d[None, :, None]
 
 
+def balance_scale(A0, B):
+    """scipy's powers-of-two balancing of [[A0 dt, B dt], [0, 0]]."""
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n], M[:n, n:] = A0 * DT, B * DT
+    return matrix_balance(M, permute=False, separate=True)[1][0]
+
+
 def taylor_then_square(X, K, s):
     """(Σ_{k ≤ K} (X/2^s)^k / k!)^(2^s), power by power in numpy."""
     Y = X / 2.0 ** s
@@ -167,8 +175,9 @@ def test_random_dense_matrices_fallback_vs_50_digit_reference():
 
 # ----------------------------------------------------------------------------- pattern and lanes
 def test_extra_zeros_and_lane_independence(lateral):
-    """Some matrices have zeros where others have entries: results equal scipy, and each
-    matrix's bits equal those it gets alone (and after a permutation of the stack)."""
+    """Some matrices have zeros where others have entries: results equal scipy (also alone);
+    a matrix's bits do not depend on its block-mates (other K, other values) nor on its place
+    in the stack, for the same union pattern."""
     B = lateral[3]
     rng = np.random.default_rng(6)
     A = lateral_stack(lateral, rng.uniform(0.5, 1.7, (70, 5)))
@@ -177,19 +186,23 @@ def test_extra_zeros_and_lane_independence(lateral):
         k = rng.choice(len(rows), rng.integers(1, 9), replace=False)
         A[i, rows[k], cols[k]] = 0.0
     A[5, 0, 2] = 0.3                                # an entry no other matrix has
-    d = matrix_balance(np.block([[A[0] * DT, B * DT], [np.zeros((2, 18))]]), permute=False,
-                       separate=True)[1][0]
-    F, G = zoh_sparse(A, B, DT, scale=d)
+    F, G = zoh_sparse(A, B, DT)
     Fr, Gr = scipy_zoh(A, B, DT)
     assert rel(F, Fr).max() < 1e-13 and rel(G, Gr).max() < 1e-13
     for i in (0, 3, 5, 6, 69):
-        Fi, Gi = zoh_sparse(A[i:i + 1], B, DT, scale=d)
-        np.testing.assert_array_equal(Fi[0], F[i])
-        np.testing.assert_array_equal(Gi[0], G[i])
+        Fi, Gi = zoh_sparse(A[i:i + 1], B, DT)
+        assert rel(Fi[0], Fr[i]) < 1e-13 and rel(Gi[0], Gr[i]) < 1e-13
+    other = A.copy()                                # odd places: new θ (×1-4), K differs
+    other[1::2] = lateral_stack(lateral, rng.uniform(0.5, 4.0, (35, 5)))
+    other[5] = A[5]
+    Fo, Go = zoh_sparse(other, B, DT, scale=balance_scale(A[0], B))
+    Fa, Ga = zoh_sparse(A, B, DT, scale=balance_scale(A[0], B))
+    np.testing.assert_array_equal(Fo[0::2], Fa[0::2])
+    np.testing.assert_array_equal(Go[0::2], Ga[0::2])
     perm = rng.permutation(70)
-    Fp, Gp = zoh_sparse(A[perm], B, DT, scale=d)
-    np.testing.assert_array_equal(Fp, F[perm])
-    np.testing.assert_array_equal(Gp, G[perm])
+    Fp, Gp = zoh_sparse(A[perm], B, DT, scale=balance_scale(A[0], B))
+    np.testing.assert_array_equal(Fp, Fa[perm])
+    np.testing.assert_array_equal(Gp, Ga[perm])
 
 
 def test_same_bits_on_one_and_two_threads(lateral):
@@ -230,8 +243,7 @@ def test_result_is_the_truncated_series_of_the_counted_degree(lateral, kmax):
     f = rng.uniform(0.5, 1.7, (40, 5))
     f[::7] *= 4.0
     A = lateral_stack(lateral, f)
-    d = matrix_balance(np.block([[A[0] * DT, B * DT], [np.zeros((2, 18))]]), permute=False,
-                       separate=True)[1][0]
+    d = balance_scale(A[0], B)
     tol = 1e-6
     F, G = zoh_sparse(A, B, DT, scale=d, tol=tol, kmax=kmax)
     X = balanced_blocks(A, B, DT, d)
@@ -256,3 +268,22 @@ def test_rejects_nan_and_mismatched_B():
         zoh_sparse(np.zeros((2, 3, 3)), np.full((3, 1), np.inf), 0.1)
     with pytest.raises(ValueError, match="does not fit"):
         zoh_sparse(np.zeros((2, 3, 3)), np.ones((4, 1)), 0.1)
+
+
+def test_product_kernel_uses_packed_fma_where_the_cpu_has_it():
+    """The sparse product's lane loops are vectorised: packed FMA (``vfmadd…pd``) in the
+    machine code of :func:`railpaper.sparse_zoh._times_x` (compiled afresh with the same options:
+    a copy loaded from numba's cache carries no assembly) when the host CPU has FMA."""
+    import re
+
+    import llvmlite.binding as ll
+
+    from railpaper.sparse_zoh import _times_x
+    if not ll.get_host_cpu_features().get("fma"):
+        pytest.skip("host CPU without FMA")
+    options = {k: v for k, v in _times_x.targetoptions.items() if k not in ("cache", "nopython")}
+    fresh = numba.njit(**options)(_times_x.py_func)
+    W, cols, rowptr = np.zeros((4, 4, 8)), np.arange(3), np.array([0, 1, 2, 3])
+    fresh(np.zeros((3, 8)), W, W.copy(), cols, rowptr, 3)
+    asm = "\n".join(fresh.inspect_asm().values())
+    assert re.search(r"vfmadd\w*pd\s[^\n]*%[yz]mm", asm)
