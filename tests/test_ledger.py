@@ -252,3 +252,25 @@ def test_environment_table_matches_the_installed_packages(tmp_path):
         assert f"| {name} | {pins[name]} |" in text
         assert version(name) == pins[name], name
     assert "| python | 3.11 " in text
+
+
+@pytest.mark.parametrize("chapter", ["reduced-order-observer", "partial-state-observer",
+                                     "rbpf-parameter-estimation", "quasi-gaussian-rbpf"])
+def test_chapter_rules_gives_each_rule_and_reason_once_and_every_reading(chapter):
+    from railpaper.pipeline.ledger import chapter_rules
+    from railpaper.pipeline.outputs import claims
+    text = chapter_rules(chapter)
+    rows = claims(chapter).values()
+    for row in rows:
+        if row.get("reading"):
+            assert f"reading: {row['reading']}" in text
+        lines = text.splitlines()
+        if row.get("justification"):
+            j = " ".join(row["justification"].split("\n"))
+            assert sum(line.endswith(f"*Why:* {j}") for line in lines) == 1, row["claim"]
+        if row.get("rule"):
+            r = " ".join(row["rule"].split("\n"))
+            assert sum(f": {r} *" in line or line.endswith(f": {r}") for line in lines) == 1, r
+    # every claim heads exactly one item
+    for claim in {row["claim"] for row in rows}:
+        assert text.count(f"**{claim}**") == 1

@@ -245,19 +245,41 @@ def chapter_claims(chapter: str, out_dir: str | Path) -> str:
 
 def chapter_rules(chapter: str) -> str:
     """How each of a chapter's verdicts is decided: the rule, fixed from the paper's wording,
-    and why (a Markdown list, one item per claim and reading)."""
+    and why (a Markdown list: one item per claim, one sub-item per reading; a rule or a reason
+    already given on the page is referred to, not repeated)."""
     from railpaper.pipeline.outputs import claims
     lines = ["How each verdict is decided (the rule, fixed from the paper's wording, and why):", ""]
+    groups: dict[str, list[tuple[str, dict]]] = {}
     for key, row in claims(chapter).items():
         check_row(key, row, f"data/{chapter}/claims.toml")
-        what = row.get("rule") or row.get("otherwise", {}).get("reason", "")
-        reading = f" — reading: {row['reading']}" if row.get("reading") else ""
-        why = f" *Why:* {row['justification']}" if row.get("justification") else ""
-        ours = f" *Ours:* {row['statistic']}." if row.get("statistic") else ""
-        selects = (f" (selected by `{row['reading_parameter']}`)"
-                   if row.get("reading_parameter") else "")
-        lines.append(f"- **{row['claim']}**{reading}{selects}: {what}{ours}{why}"
-                     .replace("\n", " "))
+        groups.setdefault(row.get("group", key), []).append((key, row))
+    shown: dict[str, tuple] = {}   # text already on the page -> (group, (elsewhere, in group))
+
+    def once(text: str, group: str, where: tuple[str, str]) -> str:
+        if text in shown:
+            first_group, first_where = shown[text]
+            return (f"as for {first_where[1]} above" if first_group == group
+                    else f"as for {first_where[0]}")
+        shown[text] = (group, where)
+        return text
+
+    for group, rows in groups.items():
+        claim = rows[0][1]["claim"]
+        lines.append(f"- **{claim}**")
+        for key, row in rows:
+            where = (f"“{claim}”" + (f" ({row['reading']})" if row.get("reading") else ""),
+                     f"the reading “{row['reading']}”" if row.get("reading") else "the rule")
+            what = row.get("rule") or row.get("otherwise", {}).get("reason", "")
+            head = f"reading: {row['reading']}" if row.get("reading") else "rule"
+            if row["claim"] != claim:                 # a reading that words the claim anew
+                head = f"**{row['claim']}** — {head}"
+            selects = (f" (selected by `{row['reading_parameter']}`)"
+                       if row.get("reading_parameter") else "")
+            ours = f" *Ours:* {row['statistic']}." if row.get("statistic") else ""
+            why = (f" *Why:* {once(row['justification'], group, where)}"
+                   if row.get("justification") else "")
+            lines.append(f"  - {head}{selects}: {once(what, group, where)}{ours}{why}"
+                         .replace("\n", " "))
     return "\n".join(lines) + "\n"
 
 
