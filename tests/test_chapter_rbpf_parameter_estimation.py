@@ -233,7 +233,7 @@ def test_page_structure(quick_result):
                  "…", "errata.csv", "parameters.toml"):
         assert word not in text, word
     names = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-rbpf-[\w-]+)", text)
-    assert len(names) == 7 and len({n for _, n in names}) == 7
+    assert len(names) == 9 and len({n for _, n in names}) == 9
     for png, name in names:
         assert f"{{numref}}`{name}`" in text
         assert f'save_figure(fig, out_dir, "{png}")' in "".join(src)
@@ -254,3 +254,69 @@ def test_page_structure(quick_result):
         assert max(map(len, s.splitlines())) <= 72, s
         for name in ("overrides", "out_dir", "quick"):
             assert not re.search(rf"\b{name}\b", s), (name, s)
+
+
+def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_result):
+    """The run's lateral posterior is IBIS called directly with the documented arguments (box
+    prior_low..prior_high x theta, x0 = 0, P0 = 1e-10 I, generator [seed, 17]); its sd sits on
+    the Cramer-Rao bound (Fisher information of the Kalman likelihood, an independent
+    computation: Bernstein-von Mises, flat prior) within the sampler's error, and the RBPF's
+    stored spreads are run_rbpf's theta_std."""
+    from railpaper.estimators.ibis import run_ibis
+    from railpaper.experiments.rbpf_parameter_estimation_io import one_thread
+
+    params, result = quick_result
+    lat = result.lateral
+    fixed, theta = chapter.vehicle()
+    with one_thread():
+        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
+        system = chapter.filter_system(params, fixed, theta, record)
+        run = run_ibis(system, record.y, params["prior_low"] * theta,
+                       params["prior_high"] * theta, np.zeros(16), 1e-10 * np.eye(16),
+                       np.random.default_rng([params["seed"], 17]), u=record.u_mps,
+                       n_particles=params["ibis_particles"], proposal="independent")
+        paper = chapter.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
+    post = lat.illustrated.posterior
+    np.testing.assert_array_equal(post.mean, run.mean / theta)
+    np.testing.assert_array_equal(post.q95, run.q95 / theta)
+    np.testing.assert_array_equal(lat.illustrated.rbpf_paper_sd_norm, paper.theta_std / theta)
+    crlb = lat.crlb.set_index("parameter")
+    for k, col in ((350, "known_350"), (params["n_steps"], f"known_{params['n_steps']}")):
+        ratio = post.sd[k - 1] / crlb[col].to_numpy()
+        assert np.all((ratio > 0.7) & (ratio < 1.4)), (k, ratio)
+    assert sum(r.posterior is not None for r in lat.runs) == min(params["ibis_records"],
+                                                                 params["n_records"])
+
+
+def test_lateral_posterior_metrics_count_by_hand(quick_result):
+    """Coverage, the posterior's 5 %-from-350 rate and the sd medians, counted by loops over
+    the typed result, with scipy's exact binomial interval."""
+    from scipy.stats import binomtest
+
+    params, result = quick_result
+    m, runs = result.metrics, [r for r in result.lateral.runs if r.posterior is not None]
+    z = 1.6448536269514722
+    counts = {"working": 0, "paper_scheme": 0, "tempered": 0}
+    within = 0
+    for r in runs:
+        p = r.posterior
+        for j in range(5):
+            counts["working"] += p.q05[-1, j] <= 1.0 <= p.q95[-1, j]
+            counts["paper_scheme"] += abs(r.rbpf_paper_norm[-1, j] - 1) <= z * \
+                r.rbpf_paper_sd_norm[-1, j]
+            counts["tempered"] += abs(r.rbpf_working_norm[-1, j] - 1) <= z * \
+                r.rbpf_working_sd_norm[-1, j]
+        within += all(abs(p.mean[k, j] - 1) <= 0.05 for k in range(349, len(p.mean))
+                      for j in range(5))
+    n = 5 * len(runs)
+    for name, k in counts.items():
+        key = f"coverage_90_{name}_lateral"
+        ci = binomtest(int(k), n).proportion_ci(0.95, method="exact")
+        assert (m[key], m[key + "_n"]) == (k / n, n)
+        assert (m[key + "_low"], m[key + "_high"]) == pytest.approx((ci.low, ci.high), abs=1e-9)
+    assert m["lateral_within_5pct_from_350_rate_posterior"] == within / len(runs)
+    sd350 = np.array([r.posterior.sd[349] for r in runs])
+    assert m["posterior_sd_rel_350_max"] == pytest.approx(np.median(sd350.max(axis=1)))
+    for j, name in enumerate(PARAMS):
+        assert m[f"posterior_sd_rel_350_{name}"] == runs[0].posterior.sd[349, j]
+        assert m[f"posterior_sd_rel_350_median_{name}"] == pytest.approx(np.median(sd350[:, j]))

@@ -137,7 +137,7 @@ def caption_values(result, params: dict) -> dict[str, str]:
         out[f"toy_err_paper_{ic}"] = number(one.rbpf_err_max[ic], 3)
         out[f"toy_err_ekf_{ic}"] = number(one.ekf_err_max[ic], 3)
     if lat is None:
-        return out
+        return out | posterior_values(result, params)
     hunting = {k: m[f"critical_speed_kmh_{k}"] for k in ("chosen", "all_halved",
                                                             "wheelset_bogie_doubled")}
     for key, v in hunting.items():
@@ -157,7 +157,14 @@ def caption_values(result, params: dict) -> dict[str, str]:
         out["crlb_worst"] = f"{number(100 * worst.max(), 2)} %"
         out["crlb_worst_name"] = PARAM_WORDS[worst.idxmax()]
         out["ekf_count"] = f"{lat.ekf_converged_count} of {len(lat.illustrated.ekf_norm)}"
-    return out
+    return out | posterior_values(result, params)
+
+
+def posterior_values(result, params: dict) -> dict[str, str]:
+    """The exact-posterior, calibration and model-error sections' numbers
+    (:func:`~railpaper.experiments.rbpf_parameter_estimation_tables_posterior.caption_values`)."""
+    from railpaper.experiments import rbpf_parameter_estimation_tables_posterior as posterior
+    return posterior.caption_values(result, params)
 
 
 def text_markdown(frame: pd.DataFrame) -> str:
