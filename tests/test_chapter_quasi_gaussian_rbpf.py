@@ -95,7 +95,7 @@ def _grid_posterior_mean(p, y):
 
 def test_typed_result_holds_the_record_and_its_exact_posterior():
     p = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13, n_monte_carlo=2,
-                                  timing=False), True)
+                                  timing=False, readings_records=0), True)
     result = chapter.run(**p)
     main = result.main
     assert main.index == p["record"] and main.measurements.shape == (40, 2)
@@ -113,7 +113,7 @@ def test_typed_result_holds_the_record_and_its_exact_posterior():
 def test_tables_show_the_monte_carlo_medians():
     """The page's Monte Carlo table holds numpy's medians of the per-record |final errors|."""
     p = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13, n_monte_carlo=5,
-                                  timing=False), True)
+                                  timing=False, readings_records=0), True)
     result = chapter.run(**p)
     table = tables.monte_carlo_table(result.metrics, p)
     row = next(r for r in table.splitlines() if r.startswith("| median abs. final error of a"))

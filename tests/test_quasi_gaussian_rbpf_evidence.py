@@ -131,7 +131,7 @@ def test_without_threshold_is_the_same_stream():
     """With weight_threshold = 0 the 'no threshold' runs repeat the thresholded ones exactly, so
     the paired threshold effect is exactly zero: the pairing shares the random stream."""
     p = chapter.SPEC.resolve(dict(n_particles=40, n_steps=25, grid_size=9, n_monte_carlo=3,
-                                  timing=False, weight_threshold=0.0), quick=True)
+                                  timing=False, weight_threshold=0.0, readings_records=0), quick=True)
     m = chapter.run(quick=True, **p).metrics
     for q in ev.QGRBPF_READINGS:
         assert m[f"final_z_a_{q}"] == m[f"final_z_a_{q}{ev.NO_THRESHOLD}"]

@@ -167,11 +167,11 @@ def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
     from railpaper.experiments import quasi_gaussian_rbpf as qg
     from railpaper.pipeline.sweep import notebook_sweep
     small = qg.SPEC.resolve(dict(n_particles=40, n_steps=30, grid_size=11, n_monte_carlo=3,
-                                 record=2, timing=False), True)
+                                 record=2, timing=False, readings_records=0), True)
     frames = []
 
     def on_workers(p, records, progress):
-        frame = notebook_sweep(qg.SPEC.name, dict(p, n_monte_carlo=1, timing=False), [p["seed"]],
+        frame = notebook_sweep(qg.SPEC.name, dict(p, n_monte_carlo=1, timing=False, readings_records=0), [p["seed"]],
                                tmp_path / "mc", grid={"record": records}, quick=True,
                                require_ok=True, workers=1)
         frames.append(frame)
