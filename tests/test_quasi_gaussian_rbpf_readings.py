@@ -61,3 +61,15 @@ def test_study_reads_each_horizon_against_its_own_last_value(tmp_path):
     assert m["reading_one_settling_step_a_h12_n"] == 3
     assert m["reading_one_settling_step_a_h12_low"] <= m["reading_one_settling_step_a_h12"] \
         <= m["reading_one_settling_step_a_h12_high"]
+
+
+def test_readings_table_is_a_well_formed_markdown_table(tmp_path):
+    """Every row has as many cells as the header (a '|' inside a cell would break the table)."""
+    path = tmp_path / "readings.toml"
+    path.write_text('[one]\nlabel = "x"\nq_var = 0.001\nr_var = 0.001\np0_std = 0.05\n'
+                    'source = "test"\n[horizons]\nvalues = [12, 60]\n')
+    table = R.readings_table(R.run_readings(n_records=3, grid_size=9, path=path))
+    rows = table.splitlines()
+    assert len(rows) == 3 and set(rows[1]) <= set("|-")
+    widths = {row.count("|") for row in rows}
+    assert widths == {len(rows[0].split("|"))- 1}

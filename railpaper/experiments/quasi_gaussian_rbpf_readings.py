@@ -236,10 +236,11 @@ def possible_horizons(study: ReadingsStudy, reading: str, par: str, step: int) -
 
 def readings_table(study: ReadingsStudy) -> str:
     """Markdown: per reading, the settling step of ``a`` at each horizon (median [95 %]) and the
-    posterior's |error| and std of ``a`` at step 55."""
+    posterior's absolute error and std of ``a`` at step 55 (no ``|`` inside a cell: it would
+    end the cell)."""
     head = ["reading", "Q, R variance", "P0 std"] + [
         f"settling step of a, {h}-step figure" for h in study.horizons_steps] + [
-        "|error| of a at step 55 (median)", "posterior std of a at step 55 (median)"]
+        "abs. error of a at step 55 (median)", "posterior std of a at step 55 (median)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for reading in study.readings:
         rows = study.table[(study.table.reading == reading.key) & (study.table.parameter == "a")]
