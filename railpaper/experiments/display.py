@@ -45,3 +45,10 @@ def markdown(frame: pd.DataFrame) -> str:
     lines += ["| " + " | ".join(cell(v) for v in row) + " |"
               for row in frame.itertuples(index=False)]
     return "\n".join(lines) + "\n"
+
+
+def legend_below(fig, ax, ncol: int = 2) -> None:
+    """One legend for the whole figure, below the axes (outside the data), with the handles
+    and labels of ``ax``; the caller leaves room with ``fig.tight_layout(rect=(0, b, 1, 1))``."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)

@@ -9,14 +9,10 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
+from railpaper.experiments.display import legend_below
 from railpaper.experiments.partial_state_observer_tables import ESTIMATOR_NAMES
 
 WIDTH_IN = 7.0
-
-
-def _legend_below(fig, ax, ncol: int = 2) -> None:
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
 
 
 def shaping_filters(result, params):
@@ -30,7 +26,7 @@ def shaping_filters(result, params):
                   label=f"{speed:g} km/h: fit, a = {filt.a:.2f}, b = {filt.b:.1f} rad/s")
     ax.set(xlabel="frequency (Hz)", ylabel="one-sided PSD of q (m²/Hz)")
     fig.tight_layout(rect=(0, 0.2, 1, 1))
-    _legend_below(fig, ax)
+    legend_below(fig, ax)
     return fig
 
 
@@ -53,7 +49,7 @@ def displacement(result, params, window_s: float = 0.35):
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    _legend_below(fig, axes[0, 0])
+    legend_below(fig, axes[0, 0])
     return fig
 
 
@@ -76,7 +72,7 @@ def convergence(result, params):
         ax.set_ylabel(f"{speed:g} km/h\n|error| (mm)")
     axes[-1, 0].set_xlabel("time (s, log scale)")
     fig.tight_layout(rect=(0, 0.1, 1, 1))
-    _legend_below(fig, axes[0, 0])
+    legend_below(fig, axes[0, 0])
     return fig
 
 
@@ -102,7 +98,7 @@ def max_error_vs_speed(result, params):
                 marker="x", ms=5, label=f"paper's observer, noise-free, {hold}")
     ax.set(yscale="log", xlabel="speed (km/h)", ylabel="max |error| after 1 s (mm)")
     fig.tight_layout(rect=(0, 0.18, 1, 1))
-    _legend_below(fig, ax)
+    legend_below(fig, ax)
     return fig
 
 
@@ -134,7 +130,7 @@ def speed_trends(result, params):
     for ax in axes[-1]:
         ax.set_xlabel("speed (km/h)")
     fig.tight_layout(rect=(0, 0.07, 1, 1))
-    _legend_below(fig, axes[0, 0], ncol=1)
+    legend_below(fig, axes[0, 0], ncol=1)
     return fig
 
 
@@ -157,7 +153,7 @@ def convergence_vs_alpha(result, params):
             "ks", ms=5, label="observer with H B = 0, with noise")
     ax.set(xlabel="slowest decay rate of N (1/s)", ylabel="convergence time (s)")
     fig.tight_layout(rect=(0, 0.2, 1, 1))
-    _legend_below(fig, ax)
+    legend_below(fig, ax)
     return fig
 
 
@@ -173,5 +169,5 @@ def noise_free_error(result, params):
         ax.semilogy(rec.t_s, err * 1e3, lw=0.9, label=label)
     ax.set(xlabel="time (s)", ylabel="max |error| over wheelsets (mm)")
     fig.tight_layout(rect=(0, 0.14, 1, 1))
-    _legend_below(fig, ax)
+    legend_below(fig, ax)
     return fig

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.ticker import FuncFormatter, NullFormatter
 
+from railpaper.experiments.display import legend_below
 from railpaper.experiments.quasi_gaussian_rbpf_evidence import PARAMS
 
 WIDTH_IN = 7.0
@@ -29,11 +30,6 @@ PAPER_ERRORS = {"a": {"qgrbpf": 0.066, "rbpf": 0.167}, "b": {"qgrbpf": -0.055, "
 WINDOW_STEPS = 80
 #: Colour of the paper's values (convergence steps, final errors are in the filters' colours).
 PAPER_COLOR = "C4"
-
-
-def _legend_below(fig, ax, ncol: int = 2) -> None:
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
 
 
 def line_widths(params) -> dict[str, float]:
@@ -75,7 +71,7 @@ def estimates(result, params):
     for ax in axes[1]:
         ax.set_xlabel("step k")
     fig.tight_layout(rect=(0, 0.17, 1, 1))
-    _legend_below(fig, axes[0, 0])
+    legend_below(fig, axes[0, 0])
     return fig
 
 
@@ -107,7 +103,7 @@ def errors(result, params):
         ax.set(ylabel=f"error of {par} (1)", title=f"{par} (paper Fig. {3 + j})")
     axes[1].set_xlabel("step k")
     fig.tight_layout(rect=(0, 0.16, 1, 1))
-    _legend_below(fig, axes[0])
+    legend_below(fig, axes[0])
     return fig
 
 
@@ -130,7 +126,7 @@ def spread_ratio(result, params):
     for ax in axes[1]:
         ax.set_xlabel("step k")
     fig.tight_layout(rect=(0, 0.14, 1, 1))
-    _legend_below(fig, axes[0, 0])
+    legend_below(fig, axes[0, 0])
     return fig
 
 
@@ -172,7 +168,7 @@ def settling(result, params):
     axes[1].xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axes[1].set_xlabel(f"settling step (the estimate stays within ±{tol:g} of its final value)")
     fig.tight_layout(rect=(0, 0.16, 1, 1))
-    _legend_below(fig, axes[0])
+    legend_below(fig, axes[0])
     return fig
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
+from railpaper.experiments.display import legend_below
 from railpaper.experiments.rbpf_parameter_estimation_tables import PARAM_LABELS
 from railpaper.models.lateral_16state import PARAM_NAMES
 
@@ -16,11 +17,6 @@ TOY_FILTERS = {"rbpf_paper": ("RBPF, paper scheme", "-"),
 #: Display names of the two RBPF schemes.
 SCHEMES = {"working": "our working scheme", "paper": "paper's scheme"}
 WINDOW_S = 0.35                                    # the paper's 350 steps at 1 ms
-
-
-def _legend_below(fig, ax, ncol=3):
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
 
 
 def toy_estimates(result, params):
@@ -41,7 +37,7 @@ def toy_estimates(result, params):
     for ax in axes[1]:
         ax.set_xlabel("step n")
     fig.tight_layout(rect=(0, 0.14, 1, 1))
-    _legend_below(fig, axes[0, 0], ncol=2)
+    legend_below(fig, axes[0, 0], ncol=2)
     return fig
 
 
@@ -86,7 +82,7 @@ def critical_speed(result, params):
     ax.axvline(params["speed_kmh"], color="0.5", ls=":", label="test speed")
     ax.set(xlabel="speed (km/h)", ylabel="max real part of eigenvalues (1/s)")
     fig.tight_layout(rect=(0, 0.2, 1, 1))
-    _legend_below(fig, ax, ncol=1)
+    legend_below(fig, ax, ncol=1)
     return fig
 
 
@@ -114,7 +110,7 @@ def normalised_estimates(result, params):
     axes[0, 0].set_ylabel("estimate / true value (1)")
     axes[1, 0].set_ylabel("max over θ of |θ̂/θ − 1| (1)")
     fig.tight_layout(rect=(0, 0.06, 1, 1))
-    _legend_below(fig, axes[0, 0], ncol=6)
+    legend_below(fig, axes[0, 0], ncol=6)
     return fig
 
 
@@ -132,7 +128,7 @@ def relative_errors(result, params):
     ax.axvline(WINDOW_S, color="k", ls=":", lw=1)
     ax.set(yscale="log", xlabel="time (s)", ylabel="|estimate / true − 1| (1)")
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    _legend_below(fig, ax, ncol=6)
+    legend_below(fig, ax, ncol=6)
     return fig
 
 
@@ -170,7 +166,7 @@ def ekf_lateral(result, params):
     ax.axhspan(0.95, 1.05, color="0.8", zorder=0, label="±5 %")
     ax.set(xlabel="time (s)", ylabel="estimate / true value (1)")
     fig.tight_layout(rect=(0, 0.08, 1, 1))
-    _legend_below(fig, ax, ncol=6)
+    legend_below(fig, ax, ncol=6)
     return fig
 
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
-from railpaper.experiments.rbpf_parameter_estimation_figures import WINDOW_S, _legend_below
+from railpaper.experiments.display import legend_below
+from railpaper.experiments.rbpf_parameter_estimation_figures import WINDOW_S
 from railpaper.experiments.rbpf_parameter_estimation_tables import PARAM_LABELS
 from railpaper.models.lateral_16state import PARAM_NAMES
 
@@ -58,7 +59,7 @@ def posterior_vs_filters(result, params):
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     fig.tight_layout(rect=(0, 0.07, 1, 1))
-    _legend_below(fig, axes[0, 0], ncol=2)
+    legend_below(fig, axes[0, 0], ncol=2)
     return fig
 
 
