@@ -162,10 +162,36 @@ def _block(x, K, S, rows, cols, rowptr, n, p):  # pragma: no cover - compiled
     return W
 
 
+@numba.njit(cache=True)
+def _finish_block(x, lo, d, rows, cols, rowptr, n, tol, kmax, F, G):  # pragma: no cover
+    """Terms, scaling, Horner and squaring of one block whose balanced ``X dt`` values on the
+    pattern are ``x`` (nnz, nb); writes ``F[lo + q]``, ``G[lo + q]`` with the balancing undone."""
+    nnz, nb = x.shape
+    m = G.shape[2]
+    p = n + m
+    K = np.zeros(nb, np.int64)
+    S = np.zeros(nb, np.int64)
+    colsum = np.zeros(p)
+    for q in range(nb):
+        colsum[:] = 0.0
+        for e in range(nnz):
+            colsum[cols[e]] += abs(x[e, q])
+        K[q], S[q] = _terms(colsum.max(), tol, kmax)
+        for e in range(nnz):
+            x[e, q] *= 0.5 ** S[q]                    # X / 2^s, exact
+    W = _block(x, K, S, rows, cols, rowptr, n, p)
+    for q in range(nb):                               # undo the balancing: D e^X D⁻¹
+        for i in range(n):
+            for j in range(n):
+                F[lo + q, i, j] = W[i, j, q] * (d[i] / d[j])
+            for j in range(m):
+                G[lo + q, i, j] = W[i, n + j, q] * (d[i] / d[n + j])
+
+
 @numba.njit(parallel=True, cache=True)
 def _zoh_blocks(A, B, dt, d, rows, cols, rowptr, tol, kmax, F, G):  # pragma: no cover
-    N, n, m = A.shape[0], A.shape[1], B.shape[2]
-    p, nnz = n + m, cols.shape[0]
+    N, n = A.shape[0], A.shape[1]
+    nnz = cols.shape[0]
     for blk in numba.prange((N + BLOCK - 1) // BLOCK):
         lo = blk * BLOCK
         nb = min(BLOCK, N - lo)
@@ -176,26 +202,28 @@ def _zoh_blocks(A, B, dt, d, rows, cols, rowptr, tol, kmax, F, G):  # pragma: no
                 r, c = rows[e], cols[e]
                 v = A[lo + q, r, c] if c < n else B[bq, r, c - n]
                 x[e, q] = v * dt * (d[c] / d[r])      # exact scaling (powers of two)
-        K = np.zeros(nb, np.int64)
-        S = np.zeros(nb, np.int64)
-        colsum = np.zeros(p)
-        for q in range(nb):
-            colsum[:] = 0.0
-            for e in range(nnz):
-                colsum[cols[e]] += abs(x[e, q])
-            K[q], S[q] = _terms(colsum.max(), tol, kmax)
-            for e in range(nnz):
-                x[e, q] *= 0.5 ** S[q]                # X / 2^s, exact
-        W = _block(x, K, S, rows, cols, rowptr, n, p)
-        for q in range(nb):                           # undo the balancing: D e^X D⁻¹
-            for i in range(n):
-                for j in range(n):
-                    F[lo + q, i, j] = W[i, j, q] * (d[i] / d[j])
-                for j in range(m):
-                    G[lo + q, i, j] = W[i, n + j, q] * (d[i] / d[n + j])
+        _finish_block(x, lo, d, rows, cols, rowptr, n, tol, kmax, F, G)
 
 
-def _balance(A0: np.ndarray, B0: np.ndarray, dt_s: float) -> np.ndarray:
+@numba.njit(parallel=True, cache=True)
+def _zoh_affine_blocks(theta, xa, xk, n, tol, kmax, d, rows, cols, rowptr, F, G
+                       ):  # pragma: no cover - compiled
+    N, n_theta = theta.shape
+    nnz = cols.shape[0]
+    for blk in numba.prange((N + BLOCK - 1) // BLOCK):
+        lo = blk * BLOCK
+        nb = min(BLOCK, N - lo)
+        x = np.empty((nnz, nb))
+        for e in range(nnz):                          # X(θ) dt on the pattern: xa + Σ θ_k xk
+            for q in range(nb):
+                v = xa[e]
+                for k in range(n_theta):
+                    v += theta[lo + q, k] * xk[k, e]
+                x[e, q] = v
+        _finish_block(x, lo, d, rows, cols, rowptr, n, tol, kmax, F, G)
+
+
+def balance_scale(A0: np.ndarray, B0: np.ndarray, dt_s: float) -> np.ndarray:
     """Powers-of-two diagonal balancing ``[[A0 dt, B0 dt], [0, 0]]`` (scipy)."""
     n, m = A0.shape[0], B0.shape[1]
     M = np.zeros((n + m, n + m))
@@ -240,12 +268,63 @@ def zoh_sparse(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | No
     nz, finite = _pattern(A, B3)
     if not finite:
         raise ValueError("zoh_sparse: matrix has NaN or inf entries")
-    d = _balance(A[0], B3[0], dt_s) if scale is None else np.asarray(scale, float)
+    d = balance_scale(A[0], B3[0], dt_s) if scale is None else np.asarray(scale, float)
     rows, cols = np.nonzero(nz)                   # row-major: CSR order
     rowptr = np.searchsorted(rows, np.arange(n + 1)).astype(np.int64)
     F, G = np.empty((N, n, n)), np.empty((N, n, m))
     _zoh_blocks(A, B3, float(dt_s), d, rows.astype(np.int64), cols.astype(np.int64), rowptr,
                 float(tol), int(kmax), F, G)
+    return F, G
+
+
+def zoh_affine(theta: np.ndarray, A0: np.ndarray, Ak: np.ndarray, B: np.ndarray, dt_s: float,
+               scale: np.ndarray | None = None, tol: float = TOL, kmax: int = KMAX
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`zoh_sparse` of ``A(θ_i) = A0 + Σ_k θ_ik A_k`` straight from the parameters.
+
+    ``A(θ)`` is never built: its balanced values ``(A0 + Σ θ_k A_k) dt`` are formed on the
+    union pattern of ``A0``, the ``A_k`` and ``B`` (found once, from the d + 2 matrices, not by
+    scanning N matrices), lane by lane, and fed to the same Horner/squaring kernel.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (N, d)
+        Parameters (units of the model's θ).
+    A0 : ndarray, shape (n, n)
+        Constant part of A, 1/s.
+    Ak : ndarray, shape (d, n, n)
+        ``∂A/∂θ_k``, 1/s per unit of θ_k.
+    B : ndarray, shape (n, m)
+        Continuous input matrix (shared).
+    dt_s, scale, tol, kmax
+        As for :func:`zoh_sparse` (default ``scale``: balancing of ``A(θ_0)``).
+
+    Returns
+    -------
+    F : ndarray, shape (N, n, n)
+    G : ndarray, shape (N, n, m)
+    """
+    theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
+    A0, Ak, B = (np.asarray(M, float) for M in (A0, Ak, B))
+    n, m = A0.shape[0], B.shape[1]
+    if Ak.shape != (theta.shape[1],) + A0.shape or B.shape[0] != n:
+        raise ValueError(f"zoh_affine: shapes theta {theta.shape}, A0 {A0.shape}, "
+                         f"Ak {Ak.shape}, B {B.shape} do not fit")
+    if not np.all(np.isfinite(theta)):
+        raise ValueError("zoh_affine: theta has NaN or inf entries")
+    if scale is None:
+        scale = balance_scale(A0 + np.tensordot(theta[0], Ak, axes=1), B, dt_s)
+    d = np.asarray(scale, float)
+    X0 = np.concatenate([A0, B], axis=1)                      # (n, n+m)
+    Xk = np.concatenate([Ak, np.zeros((len(Ak), n, m))], axis=2)
+    rows, cols = np.nonzero((X0 != 0) | (Xk != 0).any(axis=0))     # row-major: CSR order
+    rowptr = np.searchsorted(rows, np.arange(n + 1)).astype(np.int64)
+    balance = dt_s * d[cols] / d[rows]                         # exact (powers of two)
+    xa = np.ascontiguousarray(X0[rows, cols] * balance)
+    xk = np.ascontiguousarray(Xk[:, rows, cols] * balance)
+    F, G = np.empty((len(theta), n, n)), np.empty((len(theta), n, m))
+    _zoh_affine_blocks(theta, xa, xk, n, float(tol), int(kmax), d, rows.astype(np.int64),
+                       cols.astype(np.int64), rowptr, F, G)
     return F, G
 
 
@@ -263,7 +342,7 @@ def term_counts(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | N
     A = np.asarray(A, float)
     B = np.broadcast_to(np.asarray(B, float), A.shape[:1] + np.shape(B)[-2:])
     n = A.shape[-1]
-    d = _balance(A[0], B[0], dt_s) if scale is None else np.asarray(scale, float)
+    d = balance_scale(A[0], B[0], dt_s) if scale is None else np.asarray(scale, float)
     X = np.concatenate([A, B], axis=-1) * dt_s * (d[None, :] / d[:n, None])
     beta = np.abs(X).sum(axis=-2).max(axis=-1)
     Ks = np.array([_terms(b, float(tol), int(kmax)) for b in beta], dtype=np.int64)

@@ -58,9 +58,9 @@ def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, record
-            ):  # pragma: no cover - compiled
-    N, n = x.shape
+def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
+            record):  # pragma: no cover - compiled
+    N, n = x_out.shape
     p = H.shape[1]
     m = B.shape[2]
     n_steps = Y.shape[0]
@@ -72,12 +72,13 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, x_out, P_out, loglik, x_hist, var_hist, r
         nb = min(BLOCK, N - lo)
         Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
-        for q in range(nb):                       # gather the block once (structure of arrays)
+        for q in range(nb):                       # gather the block once (structure of arrays);
+            a = ancestors[lo + q]                 # x, P from the ancestor: a resampling's copy
             for i in range(n):
-                xl[i, q] = x[lo + q, i]
+                xl[i, q] = x[a, i]
                 for j in range(n):
                     Fl[i, j, q] = F[(lo + q) * sF, i, j]
-                    Pl[i, j, q] = P[lo + q, i, j]
+                    Pl[i, j, q] = P[a, i, j]
             for r in range(p):
                 for j in range(n):
                     Hl[r, j, q] = H[(lo + q) * sH, r, j]
@@ -192,7 +193,8 @@ def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
 
 
 def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.ndarray,
-               U: np.ndarray | None = None, record: bool = False):
+               U: np.ndarray | None = None, record: bool = False,
+               ancestors: np.ndarray | None = None):
     """``K`` consecutive predict + update steps of N Kalman filters with fixed matrices.
 
     The covariance recursion does not depend on the data, and between parameter moves an
@@ -211,6 +213,10 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
         Known inputs.
     record : bool
         Also return every step's posterior means and variances.
+    ancestors : ndarray of int, (N,), optional
+        Filter i starts from ``x[ancestors[i]], P[ancestors[i]]`` (a resampling's copy, done
+        in the kernel's gather instead of as two array copies); its matrices are those of
+        ``system`` at i.  Default: filter i starts from ``x[i], P[i]``.
 
     Returns
     -------
@@ -222,6 +228,14 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     """
     x = np.ascontiguousarray(x, dtype=float)
     N, n = x.shape
+    if ancestors is None:
+        ancestors = np.arange(N)
+    else:
+        ancestors = np.ascontiguousarray(ancestors, dtype=np.int64)
+        if ancestors.ndim != 1 or (ancestors.size
+                                   and not 0 <= ancestors.min() <= ancestors.max() < N):
+            raise ValueError(f"kalman_run: ancestors must be indices into the {N} filters")
+        N = len(ancestors)
     Y = np.ascontiguousarray(np.atleast_2d(np.asarray(Y, float)))
     K = Y.shape[0]
     p = system.H.shape[-2]
@@ -229,19 +243,20 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     if B is None or U is None:
         B, U = None, np.zeros((K, 1))
     U = np.ascontiguousarray(np.asarray(U, float).reshape(K, -1))
-    x_out, P_out, loglik = np.empty_like(x), np.empty((N, n, n)), np.empty((N, K))
+    x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty((N, K))
     hist_shape = (N, K, n) if record else (0, 0, 0)
     x_hist, var_hist = np.empty(hist_shape), np.empty(hist_shape)
     _kf_run(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
             _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, _stack(system.H, (p, n)),
-            _stack(system.R, (p, p)), Y, x_out, P_out, loglik, x_hist, var_hist, record)
+            _stack(system.R, (p, p)), Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
+            record)
     if record:
         return x_out, P_out, loglik, x_hist, var_hist
     return x_out, P_out, loglik
 
 
 def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
-                u: np.ndarray | None = None
+                u: np.ndarray | None = None, ancestors: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predict + update of N Kalman filters in one compiled pass.
 
@@ -257,6 +272,8 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
         Measurement y_k shared by all filters.
     u : ndarray, (m,), optional
         Known input u_k.
+    ancestors : ndarray of int, (N,), optional
+        As in :func:`kalman_run`.
 
     Returns
     -------
@@ -267,5 +284,5 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
     """
     y = np.asarray(y, float).reshape(1, -1)
     U = None if u is None else np.asarray(u, float).reshape(1, -1)
-    x_out, P_out, loglik = kalman_run(x, P, system, y, U)
+    x_out, P_out, loglik = kalman_run(x, P, system, y, U, ancestors=ancestors)
     return x_out, P_out, loglik[:, 0]

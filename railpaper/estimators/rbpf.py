@@ -45,14 +45,17 @@ SCHEMES = ("paper", "working")
 ENGINES = ("compiled", "numpy")
 
 
-def bank_step(x, P, system: LinearGaussianBatch, y, u, engine: str):
+def bank_step(x, P, system: LinearGaussianBatch, y, u, engine: str, ancestors=None):
     """Predict + update of every particle's Kalman filter: ``(x, P, log-likelihood)``.
 
     ``engine="compiled"``: the fused kernel of :mod:`railpaper.estimators.kalman_bank`;
     ``"numpy"``: the textbook :func:`predict` + Joseph-form :func:`update` (the reference).
+    Filter i starts from ``x[ancestors[i]], P[ancestors[i]]`` when ``ancestors`` is given.
     """
     if engine == "compiled":
-        return kalman_step(x, P, system, y, u)
+        return kalman_step(x, P, system, y, u, ancestors)
+    if ancestors is not None:
+        x, P = x[ancestors], P[ancestors]
     x_prior, P_prior = predict(x, P, system.F, system.Q, system.B, u)
     x, P, loglik, _, _ = update(x_prior, P_prior, y, system.H, system.R)
     return x, P, loglik
@@ -193,11 +196,13 @@ class RaoBlackwellisedPF:
             offset, scale = z.mean(axis=0), z.std(axis=0)
             scale = np.where(scale > 0, scale, 1.0)
         self.offset, self.scale = offset, scale
+        self.ancestors = None        # resampled but not yet copied: the bank's gather copies
         self.k = 0
 
     def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
-        x, P, loglik = bank_step(self.x, self.P, self.sys, y, u, self.engine)  # Steps 2.6, 2.1, 2.4
+        x, P, loglik = bank_step(self.x, self.P, self.sys, y, u, self.engine,  # Steps 2.6,
+                                 self.ancestors)                             # 2.1, 2.4
         out, w = self._weigh(loglik, x, np.diagonal(P, axis1=-2, axis2=-1))
         self._finish(w, out["resampled"], x, P)
         return out
@@ -223,8 +228,8 @@ class RaoBlackwellisedPF:
         while k0 < len(Y):
             Yc = Y[k0:k0 + chunk]
             Uc = None if U is None else np.asarray(U, float)[k0:k0 + chunk]
-            x_end, P_end, loglik, x_hist, var_hist = kalman_run(self.x, self.P, self.sys, Yc,
-                                                                Uc, record=True)
+            x_end, P_end, loglik, x_hist, var_hist = kalman_run(
+                self.x, self.P, self.sys, Yc, Uc, record=True, ancestors=self.ancestors)
             weights = []
             for j in range(len(Yc)):
                 out, w = self._weigh(loglik[:, j])
@@ -241,11 +246,12 @@ class RaoBlackwellisedPF:
             if out["resampled"]:
                 if j < len(Yc) - 1:                    # the bank's state after step j
                     x_end, P_end, _ = kalman_run(self.x, self.P, self.sys, Yc[:j + 1],
-                                                 None if Uc is None else Uc[:j + 1])
+                                                 None if Uc is None else Uc[:j + 1],
+                                                 ancestors=self.ancestors)
                 self._finish(w, True, x_end, P_end)
                 chunk = max(1, (j + 1) // 2)
             else:
-                self.x, self.P = x_end, P_end
+                self.x, self.P, self.ancestors = x_end, P_end, None
                 chunk = min(2 * chunk, max_chunk)
             k0 += j + 1
         return outputs
@@ -273,18 +279,25 @@ class RaoBlackwellisedPF:
     def _finish(self, w: np.ndarray, resample: bool, x: np.ndarray, P: np.ndarray) -> None:
         """Resampling (Step 2.3) and Liu–West move (Step 2.5) after step k's update."""
         n_particles = self.theta.shape[0]
-        theta, sys = self.theta, self.sys
+        theta, sys, ancestors = self.theta, self.sys, None
+        moved = self.move and (self.scheme == "paper" or resample)
         if resample:                                                            # Step 2.3
             idx = systematic_resample(w, self.rng)
-            theta, x, P, sys = theta[idx], x[idx], P[idx], sys.take(idx)
+            theta = theta[idx]
+            if self.engine == "compiled":         # x, P copied by the next bank call's gather
+                ancestors = idx
+            else:
+                x, P = x[idx], P[idx]
+            if not moved:                         # a move makes new matrices anyway
+                sys = sys.take(idx)
             w = np.full(n_particles, 1.0 / n_particles)
-        if self.move and (self.scheme == "paper" or resample):                  # Step 2.5
+        if moved:                                                               # Step 2.5
             theta = liu_west_move(theta, w, self.delta, self.rng, self.offset, self.scale,
                                   self.log_mask)
             sys = self.system(theta)
         with np.errstate(divide="ignore"):
             self.log_w = np.log(w)
-        self.theta, self.x, self.P, self.sys = theta, x, P, sys
+        self.theta, self.x, self.P, self.sys, self.ancestors = theta, x, P, sys, ancestors
 
 
 def stack_steps(outputs: list[dict], theta: np.ndarray, weights: np.ndarray) -> FilterRun:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from railpaper.batch_expm import zoh_stack
+from railpaper.sparse_zoh import balance_scale, zoh_affine
 from railpaper.discretise import simulate_zoh, zoh
 from railpaper.linear_gaussian import LinearGaussianBatch
 
@@ -149,17 +149,29 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
 def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
-    The ZOH is the compiled balanced Taylor :func:`railpaper.batch_expm.zoh_stack` (≈ 1e-15
-    relative to :func:`railpaper.discretise.zoh`'s scipy ``expm``, ≈ 50× faster on 1000
-    particles; ``tests/test_kalman_bank.py`` checks the two agree).
+    The ZOH is :func:`railpaper.sparse_zoh.zoh_affine`: Taylor on the 45 nonzeros of
+    ``[A(θ) dt | B dt]`` formed straight from θ (≈ 5e-16 relative to
+    :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/test_kalman_bank.py and
+    tests/test_batch_expm.py check it).  The powers-of-two balancing is fixed at the first
+    call (from its first θ) and kept, so a matrix depends only on its own θ, never on the
+    other particles of a later call.  H(θ) is formed from the same affine terms (four rows of
+    A(θ) and the yaw rate).
     """
     A0, Ak = affine_terms(fixed, speed_mps)
     B = input_matrix()
+    rows = list(ACC_ROWS)
+    H0, Hk = A0[rows], Ak[:, rows].reshape(len(Ak), -1)          # (4, 16), (5, 64)
+    balance = []
 
     def system(theta: np.ndarray) -> LinearGaussianBatch:
-        A = a_of_theta(A0, Ak, theta)
-        F, G = zoh_stack(A, B, dt_s)
-        return LinearGaussianBatch(F, Q, measurement_matrix(A), R, G)
+        theta = np.atleast_2d(np.asarray(theta, float))
+        if not balance:
+            balance.append(balance_scale(A0 + np.tensordot(theta[0], Ak, axes=1), B, dt_s))
+        F, G = zoh_affine(theta, A0, Ak, B, dt_s, scale=balance[0])
+        H = np.zeros((len(theta), len(CHANNELS), N_STATES))
+        H[:, :4] = H0 + (theta @ Hk).reshape(len(theta), 4, N_STATES)
+        H[:, 4, YAW_RATE_STATE] = 1.0
+        return LinearGaussianBatch(F, Q, H, R, G)
 
     return system
 
