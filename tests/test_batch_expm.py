@@ -18,7 +18,7 @@ import pytest
 from scipy.linalg import expm, matrix_balance
 
 from railpaper.models import lateral_16state as L
-from railpaper.sparse_zoh import KMAX, TOL, term_counts, zoh_sparse
+from railpaper.sparse_zoh import KMAX, TOL, term_counts, zoh_affine, zoh_sparse
 
 DT = 1e-3          # s, the chapter's step
 SPEED = 300 / 3.6  # m/s
@@ -287,3 +287,37 @@ def test_product_kernel_uses_packed_fma_where_the_cpu_has_it():
     fresh(np.zeros((3, 8)), W, W.copy(), cols, rowptr, 3)
     asm = "\n".join(fresh.inspect_asm().values())
     assert re.search(r"vfmadd\w*pd\s[^\n]*%[yz]mm", asm)
+
+
+# ------------------------------------------------------------------- zoh_affine: A(θ) never built
+def test_affine_zoh_from_theta_matches_scipy_and_the_built_matrix(lateral):
+    """zoh_affine(θ) against scipy's ZOH of A(θ) built by the affine form (prior box and
+    ×100 outside it, where squaring runs) and against zoh_sparse of the same A(θ)."""
+    A0, Ak, theta, B = lateral
+    rng = np.random.default_rng(7)
+    for factors in (rng.uniform(0.5, 1.7, (300, 5)), 100 * rng.uniform(0.8, 1.25, (20, 5))):
+        th = theta * factors
+        A = L.a_of_theta(A0, Ak, th)
+        F, G = zoh_affine(th, A0, Ak, B, DT)
+        Fr, Gr = scipy_zoh(A, B, DT)
+        assert rel(F, Fr).max() < 1e-13 and rel(G, Gr).max() < 1e-13
+        Fs, Gs = zoh_sparse(A, B, DT)
+        assert rel(F, Fs).max() < 1e-14 and rel(G, Gs).max() < 1e-14   # only A's rounding
+
+
+def test_affine_zoh_lane_independence_and_errors(lateral):
+    """A matrix's bits depend on its own θ only (not on block-mates or its place); bad input
+    is refused with one message."""
+    A0, Ak, theta, B = lateral
+    th = theta * np.random.default_rng(8).uniform(0.5, 1.7, (70, 5))
+    d = balance_scale(L.a_of_theta(A0, Ak, theta)[0], B)
+    F, G = zoh_affine(th, A0, Ak, B, DT, scale=d)
+    perm = np.random.default_rng(9).permutation(70)
+    Fp, Gp = zoh_affine(th[perm], A0, Ak, B, DT, scale=d)
+    assert np.array_equal(Fp, F[perm]) and np.array_equal(Gp, G[perm])
+    F1, G1 = zoh_affine(th[33:34], A0, Ak, B, DT, scale=d)
+    assert np.array_equal(F1[0], F[33]) and np.array_equal(G1[0], G[33])
+    with pytest.raises(ValueError, match="NaN or inf"):
+        zoh_affine(np.full((2, 5), np.nan), A0, Ak, B, DT)
+    with pytest.raises(ValueError, match="do not fit"):
+        zoh_affine(th[:, :4], A0, Ak, B, DT)

@@ -165,6 +165,24 @@ def test_kalman_run_over_steps_is_bit_identical_to_kalman_step_step_by_step():
     assert np.array_equal(x, x_end) and np.array_equal(P, P_end)
 
 
+def test_ancestors_gather_equals_copying_the_resampled_filters():
+    """kalman_run(..., ancestors=idx) starts filter i from x[idx[i]], P[idx[i]]: bit-identical
+    to copying first; indices outside the bank are refused."""
+    rng = np.random.default_rng(10)
+    N, n, p = 45, 5, 2
+    s = LinearGaussianBatch(np.stack([random_stable(rng, n) for _ in range(N)]),
+                            random_spd(rng, n), rng.standard_normal((p, n)), random_spd(rng, p))
+    x, P = rng.standard_normal((N, n)), np.stack([random_spd(rng, n) for _ in range(N)])
+    idx = np.sort(rng.integers(0, N, N))
+    Y = rng.standard_normal((3, p))
+    gathered = kalman_run(x, P, s, Y, ancestors=idx)
+    copied = kalman_run(x[idx], P[idx], s, Y)
+    for a, b in zip(gathered, copied):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="ancestors"):
+        kalman_run(x, P, s, Y, ancestors=np.array([0, N]))
+
+
 def test_chunked_working_rbpf_equals_step_by_step(lateral_record):
     """RaoBlackwellisedPF.steps (chunks between resampling events) = step() K times."""
     system, ys, u, theta0, opts = lateral_record("working")
