@@ -122,6 +122,9 @@ class QuasiGaussianRBPF:
         s_new = self.system(theta_new)
         if _same_measurement_model(s, s_new):                               # (4): Eqs. 12-15
             x, P = x_post, P_post            # H, R do not depend on θ: same update as in (1)
+        elif self.engine == "compiled":     # the old particle's prediction, the new θ's H, R
+            mixed = LinearGaussianBatch(s.F, s.Q, s_new.H, s_new.R, s.B)
+            x, P, _ = bank_step(self.x, self.P, mixed, y, u, self.engine)
         else:
             x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)
             x, P, _, _, _ = update(x_prior, P_prior, y, s_new.H, s_new.R)
