@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from benchmarks.filterpy_rbpf import FilterpyRBPF
+from benchmarks.flops import step_budget
 from benchmarks.timing import LoadLog, interleaved, paired_ratio, rates, summary
 from railpaper.discretise import zoh
 from railpaper.estimators.qgrbpf import QuasiGaussianRBPF
@@ -123,6 +124,22 @@ def working_timeline(prob: dict, N: int, skip: int, steps: int) -> tuple[float, 
     filt.steps(Y[skip:skip + steps], U[skip:skip + steps])
     settled = (time.perf_counter() - t0) / steps
     return first, settled, int(sum(o["resampled"] for o in outputs))
+
+
+def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, int, int]:
+    """IBIS (the chapter's exact-posterior scheme, :func:`railpaper.estimators.ibis.run_ibis`
+    with the chapter's proposal, prior box and state prior) over steps 1..n_steps at N: seconds
+    per step, resampling events, Kalman filter steps run (moves re-run the whole history)."""
+    from railpaper.estimators.ibis import run_ibis
+    from railpaper.experiments.rbpf_parameter_estimation_posterior import PROPOSAL
+    p, theta = prob["p"], prob["theta"]
+    t0 = time.perf_counter()
+    run = run_ibis(prob["systems"]["compiled"], prob["y"][:n_steps], p["prior_low"] * theta,
+                   p["prior_high"] * theta, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
+                   np.random.default_rng(seed), u=prob["u"][:n_steps], n_particles=N,
+                   proposal=PROPOSAL)
+    return ((time.perf_counter() - t0) / n_steps, len(run.resample_steps),
+            int(run.n_filter_steps))
 
 
 def profile_step(prob: dict, N: int, repeats: int) -> dict:
@@ -277,6 +294,12 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
     resamplings = sorted({t[2] for t in timeline})
     rows.append(_row("rbpf-working", "compiled, settled", N, steady["steps"],
                      [t[1] for t in timeline]))
+    ibis_steps = 200 if quick else FIRST_STEPS
+    progress(f"railpaper bench: IBIS N={N}, steps 1-{ibis_steps} x {repeats}")
+    ibis = interleaved({"ibis": lambda: time_ibis(prob, N, ibis_steps)}, repeats)["ibis"]
+    loads.sample("ibis")
+    rows.append(_row("ibis", "compiled", N, ibis_steps, [t[0] for t in ibis],
+                     resamplings=ibis[0][1], filter_steps_per_step=ibis[0][2] / ibis_steps / N))
     baselines = {}
     for kind, k in (("rbpf-working", "fp_working"), ("rbpf-paper", "fp_paper")):
         steps = sizes[k]
@@ -302,6 +325,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
             baselines[(kind, engine)] = r
     progress("railpaper bench: profile, gain settling and peak memory")
     prof = profile_step(prob, 1000, 5 if quick else 20)
+    budget = step_budget(prob, prof, 1000)
     settling = gain_settling(prob)
     mem = peak_memory_mb(10000, 3)
     loads.sample("end")
@@ -315,7 +339,8 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
         steps_per_s_rbpf_lateral_N1000_paper_scheme=row("rbpf-paper"),
         steps_per_s_rbpf_lateral_N1000_step_api=row("rbpf-working", "compiled, step()"),
         steps_per_s_rbpf_lateral_N1000_settled=row("rbpf-working", "compiled, settled"),
-        steps_per_s_qgrbpf_lateral_N1000=row("qgrbpf"))
+        steps_per_s_qgrbpf_lateral_N1000=row("qgrbpf"),
+        steps_per_s_ibis_lateral_N1000_first=row("ibis"))
     for key, r in headline.items():
         headline[key], spread[key] = r["steps_per_s"], [r["steps_per_s_min"], r["steps_per_s_max"]]
     speedups = dict(speedup_vs_filterpy_lateral_N1000=("rbpf-working", "filterpy"),
@@ -331,7 +356,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
         resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
-        profile_N1000_ms=prof, memory_N10000=mem, quick=quick, sizes=sizes, repeats=repeats,
+        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
         setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],
                    speed_kmh=p["speed_kmh"], ess_fraction=p["ess_fraction"],

@@ -175,6 +175,8 @@ def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     monkeypatch.setattr(engine, "profile_step", lambda *a: dict.fromkeys(PROFILE_LABELS, 1.0))
     monkeypatch.setattr(engine, "gain_settling", lambda prob: payload()["gain_settling"])
     monkeypatch.setattr(engine, "peak_memory_mb", lambda *a: payload()["memory_N10000"])
+    monkeypatch.setattr(engine, "time_ibis", lambda prob, N, n: (2e-2, 12, 9 * n * N))
+    monkeypatch.setattr(engine, "step_budget", lambda prob, prof, N: dict(N=N))
     out = engine.main_payload(True, progress=lambda m: None)
     assert OLD_KEYS | NEW_KEYS <= set(out) and out["repeats"] >= 5
     assert out["resamplings_first1000"] == 183
@@ -183,3 +185,22 @@ def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     base = [k for k, N in calls if ":" in k and not k.endswith(":step")]
     assert base[:4] == ["rbpf-working:numpy", "rbpf-working:filterpy"] * 2
     assert all(r["repeats"] == out["repeats"] for r in out["rows"])
+
+
+def test_goals_say_met_or_the_factor_missing_and_withhold_busy_ratios():
+    """Goal rows from the payload: a rate goal missed by 10x says 10x, a ratio goal met says met
+    with no factor, an absent key says 'not measured', and a busy run withholds the ratios."""
+    from railpaper.pipeline.bench import goal_rows, goals_markdown
+    quiet = payload()
+    quiet["time_ratio_qgrbpf_over_rbpf_N1000"] = 0.8
+    goals = {g["key"]: g for g in goal_rows(quiet)}
+    paper = goals["steps_per_s_rbpf_lateral_N1000_paper_scheme"]
+    assert paper["met"] is False and paper["factor_missing"] == pytest.approx(10.0)
+    ratio = goals["time_ratio_qgrbpf_over_rbpf_N1000"]
+    assert ratio["met"] is True and ratio["factor_missing"] is None
+    assert goals["steps_per_s_ibis_lateral_N1000_first"]["why"] == "not measured in this run"
+    busy = {g["key"]: g for g in goal_rows(payload(load=(5.0, 5.0, 5.0)))}
+    assert busy["time_ratio_qgrbpf_over_rbpf_N1000"]["measured"] is None
+    assert busy["steps_per_s_rbpf_lateral_N1000_paper_scheme"]["measured"] == 100.0
+    page = goals_markdown(payload(load=(5.0, 5.0, 5.0)))
+    assert WITHHELD in page and "10.0×" in page

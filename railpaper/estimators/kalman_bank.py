@@ -184,6 +184,19 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
                     P_out[lo + q, i, j] = Pl[i, j, q]
 
 
+def multiply_adds(n: int, p: int, m: int) -> int:
+    """Multiply-adds of one filter's step in :func:`_kf_run` (as the kernel runs it, dense H).
+
+    x⁻ = F x + B u: n² + n m;  F P: n³;  F P Fᵀ (upper triangle): n²(n+1)/2;  H P⁻: p n²;
+    S (upper): n p(p+1)/2;  v: p n;  Cholesky: Σ_j j (p − j);  z and W = L⁻¹ H P⁻:
+    (n + 1) p(p−1)/2;  zᵀz: p;  x += Wᵀ z: n p;  P −= Wᵀ W (upper): p n(n+1)/2.  Lateral
+    model (n = 16, p = 5, m = 2): 9 115.  Divisions, square roots and logs are not counted.
+    """
+    chol = sum(j * (p - j) for j in range(p))
+    return (n * n + n * m + n ** 3 + n * n * (n + 1) // 2 + p * n * n + n * p * (p + 1) // 2
+            + p * n + chol + (n + 1) * p * (p - 1) // 2 + p + n * p + p * n * (n + 1) // 2)
+
+
 def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
     """M as a C-contiguous (N, r, c) or (1, r, c) stack (1: shared by every filter)."""
     if M is None:

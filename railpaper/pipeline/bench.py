@@ -67,6 +67,71 @@ def ratio_verdict(machine: dict) -> tuple[bool, str]:
     return True, f"the 1-minute load average stayed at or below {top:.1f} on {cores} cores"
 
 
+#: The engine issue's goals at N = 1000 on the benchmark machine: (label, payload key, sense,
+#: target).  ">=": the measured median must reach the target; "<=": must not exceed it.
+GOALS = (
+    ("working scheme (tempered Liu-West), steps 1-1000", "steps_per_s_rbpf_lateral_N1000_first1000",
+     ">=", 2000.0),
+    ("posterior-targeting scheme (IBIS), first steps", "steps_per_s_ibis_lateral_N1000_first",
+     ">=", 2000.0),
+    ("paper scheme (every particle moved every step)",
+     "steps_per_s_rbpf_lateral_N1000_paper_scheme", ">=", 1000.0),
+    ("Q-GRBPF time / RBPF time (paper scheme)", "time_ratio_qgrbpf_over_rbpf_N1000", "<=", 1.0),
+    ("x filterpy-per-particle RBPF, working scheme", "speedup_vs_filterpy_lateral_N1000",
+     ">=", 100.0),
+    ("x filterpy-per-particle RBPF, paper scheme",
+     "speedup_vs_filterpy_lateral_N1000_paper_scheme", ">=", 100.0),
+)
+
+
+def goal_rows(payload: dict) -> list[dict]:
+    """Each goal with the run's median, its min-max, met or not and the factor still missing
+    (target / measured for "≥" goals, measured / target for "≤"); ratios from a busy run are
+    withheld (``measured`` None)."""
+    ok, _ = ratio_verdict(payload["machine"])
+    spread = payload.get("spread", {})
+    out = []
+    for label, key, sense, target in GOALS:
+        value = payload.get(key)
+        if value is None or (_is_ratio(key) and not ok):
+            out.append(dict(goal=label, key=key, sense=sense, target=target, measured=None,
+                            spread=None, met=None, factor_missing=None,
+                            why="not measured in this run" if value is None else WITHHELD))
+            continue
+        met = value >= target if sense == ">=" else value <= target
+        missing = target / value if sense == ">=" else value / target
+        out.append(dict(goal=label, key=key, sense=sense, target=target, measured=value,
+                        spread=spread.get(key), met=bool(met),
+                        factor_missing=None if met else missing))
+    return out
+
+
+def _goal_cells(g: dict) -> tuple[str, str, str, str]:
+    target = f"{g['sense']} {g['target']:g}"
+    if g["measured"] is None:
+        return target, g["why"], "", ""
+    rng = f" ({g['spread'][0]:.4g}-{g['spread'][1]:.4g})" if g["spread"] else ""
+    state = "met" if g["met"] else "missed"
+    missing = f"{g['factor_missing']:.1f}x" if g["factor_missing"] else ""
+    return target, f"{g['measured']:.4g}{rng}", state, missing
+
+
+def flops_line(payload: dict) -> str | None:
+    """FLOP count of a paper-scheme step and the attained rates, one sentence."""
+    f = payload.get("flops_N1000")
+    if f is None:
+        return None
+    nominal = (f", nominal peak {f['nominal_peak_gflops']:.0f} GFLOP/s at {f['clock_ghz']:.2f} "
+               "GHz if 16 FLOP/cycle/core (an assumption)" if f.get("nominal_peak_gflops")
+               else "")
+    return (f"FLOP of a paper-scheme step at N = {f['N']}: {f['step_gflop'] * 1e3:.1f} MFLOP "
+            f"(Kalman bank {f['bank_multiply_adds_per_particle']} and new matrices "
+            f"{f['zoh_multiply_adds_per_particle']:.0f} multiply-adds per particle); attained: "
+            f"bank {f['bank_gflops']:.1f} GFLOP/s ({f['bank_fraction_of_dgemm']:.0%} of this "
+            f"machine's dgemm, {f['dgemm_gflops']:.0f} GFLOP/s), ZOH {f['zoh_gflops']:.1f} "
+            f"GFLOP/s ({f['zoh_fraction_of_dgemm']:.0%}){nominal}")
+
+
 def _rate(r: dict) -> str:
     spread = (f" ({r['steps_per_s_min']:.1f}-{r['steps_per_s_max']:.1f})"
               if "steps_per_s_min" in r else "")
@@ -108,6 +173,12 @@ def format_table(payload: dict) -> str:
     prof = payload["profile_N1000_ms"]
     lines.append("where a paper-scheme step goes at N = 1000 (ms): "
                  + ", ".join(f"{k} {v:.2f}" for k, v in prof.items()))
+    if flops_line(payload):
+        lines.append(flops_line(payload))
+    goals = [("goal at N = 1000", "target", "measured (min-max)", "", "factor missing")]
+    goals += [(g["goal"],) + _goal_cells(g) for g in goal_rows(payload)]
+    gw = [max(len(row[i]) for row in goals) for i in range(5)]
+    lines += [""] + ["  ".join(c.ljust(w) for c, w in zip(row, gw)).rstrip() for row in goals]
     mem = payload["memory_N10000"]
     lines.append(f"memory at N = 10000: peak RSS {mem['peak_rss_mb']:.0f} MB, "
                  f"{mem['particles_mb']:.0f} MB more than at N = 10 (one copy of the particle "
@@ -139,7 +210,10 @@ def plot_steps_per_s(payload: dict, path: Path) -> Path:
                                    [b - a for a, b in zip(rate, high)]],
                     fmt=style, capsize=3, label=f"{kind} (compiled)")
     for r in payload["rows"]:
-        if r["engine"] != "compiled":
+        if r["filter"] == "ibis":
+            ax.plot(r["N"], r["steps_per_s"], "D", ms=7, color="tab:purple",
+                    label=f"IBIS, steps 1-{r['steps']} (compiled)")
+        elif r["engine"] != "compiled":
             marker = "x" if r["engine"] == "filterpy" else "+"
             ax.plot(r["N"], r["steps_per_s"], marker, ms=9, color="0.3")
             ax.annotate(f"{r['filter']}:{r['engine']}", (r["N"], r["steps_per_s"]),
@@ -299,10 +373,27 @@ def findings_markdown(payload: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def goals_markdown(payload: dict) -> str:
+    """The goals table (target, this run's median and min–max, met or the factor missing) and
+    the FLOP sentence, as MyST markdown."""
+    lines = ["| goal at N = 1000 | target | measured (min–max) | | factor missing |",
+             "|---|---|---|---|---|"]
+    for g in goal_rows(payload):
+        target, measured, state, missing = _goal_cells(g)
+        lines.append(f"| {g['goal'].replace('x filterpy', '× filterpy')} | "
+                     f"{target.replace('>=', '≥').replace('<=', '≤')} | "
+                     f"{measured.replace('-', '–') if g['measured'] is not None else measured} | "
+                     f"{state} | {missing.replace('x', '×')} |")
+    line = flops_line(payload)
+    if line:
+        lines += ["", f"- {line}."]
+    return "\n".join(lines) + "\n"
+
+
 def write_performance(book_dir: Path) -> Path:
     """Run the quick benchmark for the book's Performance page: ``_generated/`` gets
     ``bench.json``, ``performance_setup.md``, ``performance_table.md``,
-    ``performance_findings.md`` and ``performance_steps_per_s.png``."""
+    ``performance_findings.md``, ``performance_goals.md`` and ``performance_steps_per_s.png``."""
     out = Path(book_dir) / "_generated"
     out.mkdir(parents=True, exist_ok=True)
     engine = _load_benchmarks()
@@ -317,4 +408,5 @@ def write_performance_files(payload: dict, out: Path) -> Path:
     (out / "performance_table.md").write_text(
         busy_note(payload["machine"]) + "\n\n" + format_markdown(payload))
     (out / "performance_findings.md").write_text(findings_markdown(payload))
+    (out / "performance_goals.md").write_text(goals_markdown(payload))
     return plot_steps_per_s(payload, out / "performance_steps_per_s.png")
