@@ -14,10 +14,11 @@ B dt], [0, 0]]``) we compute ``e^M`` by
 The result agrees with :func:`scipy.linalg.expm` (Padé 13) to ≈ 1e-13 relative for the lateral
 model; tests/test_kalman_bank.py asserts ≤ 1e-10 on it and on random stable matrices.
 
-:func:`railpaper.sparse_zoh.zoh_sparse` computes the same ZOH as :func:`zoh_stack` on the
-augmented matrix's nonzeros, without squaring inside the lateral model's prior box (≈ 13k instead
-of ≈ 35k multiply-adds per particle); it is opt-in: switching changes the chapter's CRLB metrics
-by up to 1.3e-9 relative (finite differences of the Kalman filter amplify last-bit differences).
+:func:`railpaper.sparse_zoh.zoh_sparse` computes the same ZOH on the augmented matrix's nonzeros,
+without squaring inside the lateral model's prior box (≈ 13k instead of ≈ 35k multiply-adds per
+particle), and :func:`railpaper.sparse_zoh.zoh_affine` does so straight from θ: the lateral model's
+``system`` uses the latter since issue 15.  :func:`zoh_stack` stays the dense general-purpose
+route (and :func:`stack_matmul` the Kalman bank's product).
 """
 
 from __future__ import annotations

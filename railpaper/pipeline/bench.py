@@ -122,7 +122,8 @@ def flops_line(payload: dict) -> str | None:
     if f is None:
         return None
     nominal = (f", nominal peak {f['nominal_peak_gflops']:.0f} GFLOP/s at {f['clock_ghz']:.2f} "
-               "GHz if 16 FLOP/cycle/core (an assumption)" if f.get("nominal_peak_gflops")
+               f"GHz if {f.get('nominal_flop_per_cycle', 32)} FLOP/cycle/core (an assumption)"
+               if f.get("nominal_peak_gflops")
                else "")
     return (f"FLOP of a paper-scheme step at N = {f['N']}: {f['step_gflop'] * 1e3:.1f} MFLOP "
             f"(Kalman bank {f['bank_multiply_adds_per_particle']} and new matrices "
