@@ -294,7 +294,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
     resamplings = sorted({t[2] for t in timeline})
     rows.append(_row("rbpf-working", "compiled, settled", N, steady["steps"],
                      [t[1] for t in timeline]))
-    ibis_steps = 200 if quick else FIRST_STEPS
+    ibis_steps = 100 if quick else FIRST_STEPS
     progress(f"railpaper bench: IBIS N={N}, steps 1-{ibis_steps} x {repeats}")
     ibis = interleaved({"ibis": lambda: time_ibis(prob, N, ibis_steps)}, repeats)["ibis"]
     loads.sample("ibis")

@@ -72,15 +72,18 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
         nb = min(BLOCK, N - lo)
         Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
-        for q in range(nb):                       # gather the block once (structure of arrays);
-            a = ancestors[lo + q]                 # x, P from the ancestor: a resampling's copy
-            for i in range(n):
-                xl[i, q] = x[a, i]
-                for j in range(n):
+        anc = ancestors[lo:lo + nb]               # x, P from the ancestor: a resampling's copy
+        for i in range(n):                        # gather the block once (structure of arrays)
+            for q in range(nb):
+                xl[i, q] = x[anc[q], i]
+            for j in range(n):
+                for q in range(nb):
                     Fl[i, j, q] = F[(lo + q) * sF, i, j]
-                    Pl[i, j, q] = P[a, i, j]
-            for r in range(p):
-                for j in range(n):
+                for q in range(nb):
+                    Pl[i, j, q] = P[anc[q], i, j]
+        for r in range(p):
+            for j in range(n):
+                for q in range(nb):
                     Hl[r, j, q] = H[(lo + q) * sH, r, j]
         xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
