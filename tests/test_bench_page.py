@@ -204,3 +204,25 @@ def test_goals_say_met_or_the_factor_missing_and_withhold_busy_ratios():
     assert busy["steps_per_s_rbpf_lateral_N1000_paper_scheme"]["measured"] == 100.0
     page = goals_markdown(payload(load=(5.0, 5.0, 5.0)))
     assert WITHHELD in page and "10.0×" in page
+
+
+def test_load_log_separates_the_bench_from_other_work():
+    """LoadLog's own share is the 60-s exponential average of the process's CPU use: a bench
+    using 2 cores for 120 s reaches 2(1 - e^-2) = 1.73, and with a load of 2.05 the other work
+    is 0.32 cores (ratios printed); with a load of 3.0, 1.27 cores (withheld)."""
+    import math
+
+    from benchmarks.timing import LoadLog
+    for load, printed in ((2.05, True), (3.0, False)):
+        clock, cpu = iter([0.0, 0.0, 120.0]), iter([0.0, 240.0])
+        log = LoadLog(clock=lambda: next(clock), load=lambda: (load, 1.0, 1.0),
+                      cpu=lambda: next(cpu))
+        log.sample("start")
+        log.sample("end")
+        d = log.as_dict()
+        own = 2 * (1 - math.exp(-2))
+        assert d["load_samples"][-1]["own_1min"] == pytest.approx(own, abs=1e-3)
+        assert d["other_max_1min"] == pytest.approx(max(load, load - own), abs=1e-3)
+        machine = dict(cores=2, **d)
+        machine["other_max_1min"] = load - own                   # the start sample aside
+        assert ratio_verdict(machine)[0] is printed

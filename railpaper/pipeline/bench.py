@@ -47,13 +47,32 @@ def _is_ratio(key: str) -> bool:
     return key.startswith(("speedup_", "time_ratio_"))
 
 
+#: Most other work (cores, 1-minute average) under which ratios between engines are printed.
+OTHER_WORK_MAX = 0.5
+
+
 def ratio_verdict(machine: dict) -> tuple[bool, str]:
     """May this run's ratios between engines be printed?  (ok, reason in one sentence).
 
-    Not when the 1-minute load average exceeded the core count at any sample of the run (before,
-    between the interleaved blocks, after; the bench's own threads count in it) or was not
-    recorded: the engines then competed with other work for the cores.
+    Not when work other than the bench reached :data:`OTHER_WORK_MAX` cores at any sample of the
+    run (before, between the interleaved blocks, after): the 1-minute load average minus the
+    bench's own CPU use averaged the same way (``other_max_1min``, see
+    ``benchmarks.timing.LoadLog``).  A run that recorded only the load (older JSON) is judged by
+    the load itself against the core count (the bench's own threads count in it); a run that
+    recorded neither, never.  Why not the load alone: on a 2-core machine the bench's own two
+    threads make a load of 2.0-2.1 with nothing else running.
     """
+    if "other_max_1min" in machine:
+        other = machine["other_max_1min"]
+        if other > OTHER_WORK_MAX:
+            return False, (f"ratios withheld: work other than the bench reached {other:.2f} "
+                           f"cores (1-minute load average {machine.get('load_max_1min', 0):.1f} "
+                           f"minus the bench's own CPU use), above {OTHER_WORK_MAX:g}, so the "
+                           "engines competed with other work for the cores; re-run "
+                           "`railpaper bench` on a quiet machine")
+        return True, (f"work other than the bench stayed at or below {max(other, 0):.2f} cores "
+                      f"(the load average reached {machine.get('load_max_1min', 0):.1f} on "
+                      f"{machine['cores']} cores, the bench's own threads included)")
     loads = [machine[k][0] for k in ("load_before", "load_after") if k in machine]
     if "load_max_1min" in machine:
         loads.append(machine["load_max_1min"])
@@ -319,7 +338,9 @@ def busy_note(machine: dict) -> str:
         return "The machine's load was not recorded by this run; ratios are withheld."
     text = (f"Load average (1 min) {loads[0]:.1f} before and {loads[-1]:.1f} after the run"
             + (f", at most {machine['load_max_1min']:.1f} during it"
-               if "load_max_1min" in machine else "") + f", on {machine['cores']} cores")
+               if "load_max_1min" in machine else "") + f", on {machine['cores']} cores"
+            + (f"; work other than the bench at most {max(machine['other_max_1min'], 0):.2f} "
+               "cores" if "other_max_1min" in machine else ""))
     if not ratio_verdict(machine)[0]:
         return (f"**The machine was busy**: {text}. Other work competed for the cores, so these "
                 "rates are low and no ratio between engines is printed; re-run `railpaper bench` "
