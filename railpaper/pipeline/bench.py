@@ -2,8 +2,9 @@
 
 Benchmarks are measurements, not tests: nothing here asserts a speed.  Every text made here (the
 terminal table, the book's Performance page) is built from the bench payload alone, and no ratio
-between engines is printed from a run whose 1-minute load average exceeded the core count
-(:func:`ratio_verdict`): the reason is printed instead.
+between engines is printed from a run in which other work competed for the cores
+(:func:`railpaper.pipeline.bench_verdict.ratio_verdict`): the reason is printed instead.  The
+goal table and FLOP sentence are :mod:`railpaper.pipeline.bench_goals`.
 """
 
 from __future__ import annotations
@@ -14,10 +15,11 @@ import json
 import sys
 from pathlib import Path
 
+from railpaper.pipeline.bench_goals import flops_line, goal_cells, goal_rows, goals_markdown
+from railpaper.pipeline.bench_verdict import WITHHELD, is_ratio, ratio_verdict
 from railpaper.pipeline.chapters import REPO_DIR, PipelineError
 
 REAL_TIME_STEPS_PER_S = 1000.0          # paper 003's lateral model is sampled at 1 kHz
-WITHHELD = "withheld"
 
 
 def _load_benchmarks():
@@ -41,115 +43,6 @@ def _load_benchmarks():
         raise PipelineError(f"another module named 'benchmarks' is already imported "
                             f"({getattr(loaded, '__file__', loaded)}), not {root}")
     return importlib.import_module("benchmarks.rbpf_engine")
-
-
-def _is_ratio(key: str) -> bool:
-    return key.startswith(("speedup_", "time_ratio_"))
-
-
-#: Most other work (cores, 1-minute average) under which ratios between engines are printed.
-OTHER_WORK_MAX = 0.5
-
-
-def ratio_verdict(machine: dict) -> tuple[bool, str]:
-    """May this run's ratios between engines be printed?  (ok, reason in one sentence).
-
-    Not when work other than the bench reached :data:`OTHER_WORK_MAX` cores at any sample of the
-    run (before, between the interleaved blocks, after): the 1-minute load average minus the
-    bench's own CPU use averaged the same way (``other_max_1min``, see
-    ``benchmarks.timing.LoadLog``).  A run that recorded only the load (older JSON) is judged by
-    the load itself against the core count (the bench's own threads count in it); a run that
-    recorded neither, never.  Why not the load alone: on a 2-core machine the bench's own two
-    threads make a load of 2.0-2.1 with nothing else running.
-    """
-    if "other_max_1min" in machine:
-        other = machine["other_max_1min"]
-        if other > OTHER_WORK_MAX:
-            return False, (f"ratios withheld: work other than the bench reached {other:.2f} "
-                           f"cores (1-minute load average {machine.get('load_max_1min', 0):.1f} "
-                           f"minus the bench's own CPU use), above {OTHER_WORK_MAX:g}, so the "
-                           "engines competed with other work for the cores; re-run "
-                           "`railpaper bench` on a quiet machine")
-        return True, (f"work other than the bench stayed at or below {max(other, 0):.2f} cores "
-                      f"(the load average reached {machine.get('load_max_1min', 0):.1f} on "
-                      f"{machine['cores']} cores, the bench's own threads included)")
-    loads = [machine[k][0] for k in ("load_before", "load_after") if k in machine]
-    if "load_max_1min" in machine:
-        loads.append(machine["load_max_1min"])
-    if not loads:
-        return False, "ratios withheld: this run did not record the machine's load"
-    top, cores = max(loads), machine["cores"]
-    if top > cores:
-        return False, (f"ratios withheld: the 1-minute load average reached {top:.1f} on "
-                       f"{cores} cores during this run, so the engines competed with other work "
-                       "for the cores; re-run `railpaper bench` on a quiet machine")
-    return True, f"the 1-minute load average stayed at or below {top:.1f} on {cores} cores"
-
-
-#: The engine issue's goals at N = 1000 on the benchmark machine: (label, payload key, sense,
-#: target).  ">=": the measured median must reach the target; "<=": must not exceed it.
-GOALS = (
-    ("working scheme (tempered Liu-West), steps 1-1000", "steps_per_s_rbpf_lateral_N1000_first1000",
-     ">=", 2000.0),
-    ("posterior-targeting scheme (IBIS), first steps", "steps_per_s_ibis_lateral_N1000_first",
-     ">=", 2000.0),
-    ("paper scheme (every particle moved every step)",
-     "steps_per_s_rbpf_lateral_N1000_paper_scheme", ">=", 1000.0),
-    ("Q-GRBPF time / RBPF time (paper scheme)", "time_ratio_qgrbpf_over_rbpf_N1000", "<=", 1.0),
-    ("x filterpy-per-particle RBPF, working scheme", "speedup_vs_filterpy_lateral_N1000",
-     ">=", 100.0),
-    ("x filterpy-per-particle RBPF, paper scheme",
-     "speedup_vs_filterpy_lateral_N1000_paper_scheme", ">=", 100.0),
-)
-
-
-def goal_rows(payload: dict) -> list[dict]:
-    """Each goal with the run's median, its min-max, met or not and the factor still missing
-    (target / measured for "≥" goals, measured / target for "≤"); ratios from a busy run are
-    withheld (``measured`` None)."""
-    ok, _ = ratio_verdict(payload["machine"])
-    spread = payload.get("spread", {})
-    out = []
-    for label, key, sense, target in GOALS:
-        value = payload.get(key)
-        if value is None or (_is_ratio(key) and not ok):
-            out.append(dict(goal=label, key=key, sense=sense, target=target, measured=None,
-                            spread=None, met=None, factor_missing=None,
-                            why="not measured in this run" if value is None else WITHHELD))
-            continue
-        met = value >= target if sense == ">=" else value <= target
-        missing = target / value if sense == ">=" else value / target
-        out.append(dict(goal=label, key=key, sense=sense, target=target, measured=value,
-                        spread=spread.get(key), met=bool(met),
-                        factor_missing=None if met else missing))
-    return out
-
-
-def _goal_cells(g: dict) -> tuple[str, str, str, str]:
-    target = f"{g['sense']} {g['target']:g}"
-    if g["measured"] is None:
-        return target, g["why"], "", ""
-    rng = f" ({g['spread'][0]:.4g}-{g['spread'][1]:.4g})" if g["spread"] else ""
-    state = "met" if g["met"] else "missed"
-    missing = f"{g['factor_missing']:.1f}x" if g["factor_missing"] else ""
-    return target, f"{g['measured']:.4g}{rng}", state, missing
-
-
-def flops_line(payload: dict) -> str | None:
-    """FLOP count of a paper-scheme step and the attained rates, one sentence."""
-    f = payload.get("flops_N1000")
-    if f is None:
-        return None
-    nominal = (f", nominal peak {f['nominal_peak_gflops']:.0f} GFLOP/s at {f['clock_ghz']:.2f} "
-               f"GHz if {f.get('nominal_flop_per_cycle', 32)} FLOP/cycle/core (an assumption)"
-               if f.get("nominal_peak_gflops")
-               else "")
-    return (f"FLOP of a paper-scheme step at N = {f['N']}: {f['step_gflop'] * 1e3:.1f} MFLOP "
-            f"(Kalman bank {f['bank_multiply_adds_per_particle']} and new matrices "
-            f"{f['zoh_multiply_adds_per_particle']:.0f} multiply-adds per particle); attained: "
-            f"bank {f['bank_gflops']:.1f} GFLOP/s ({f['bank_fraction_of_dgemm']:.0%} of this "
-            f"machine's dgemm, {f['dgemm_gflops']:.0f} GFLOP/s), ZOH {f['zoh_gflops']:.1f} "
-            f"GFLOP/s ({f['zoh_fraction_of_dgemm']:.0%}){nominal}")
 
 
 def _rate(r: dict) -> str:
@@ -185,7 +78,7 @@ def format_table(payload: dict) -> str:
     spread = payload.get("spread", {})
     for key, value in payload.items():
         if isinstance(value, (int, float)) and not isinstance(value, bool) and key != "repeats":
-            if _is_ratio(key) and not ok:
+            if is_ratio(key) and not ok:
                 lines.append(f"{key} = {WITHHELD}")
                 continue
             rng = f" (min-max {spread[key][0]:.4g}-{spread[key][1]:.4g})" if key in spread else ""
@@ -196,7 +89,7 @@ def format_table(payload: dict) -> str:
     if flops_line(payload):
         lines.append(flops_line(payload))
     goals = [("goal at N = 1000", "target", "measured (min-max)", "", "factor missing")]
-    goals += [(g["goal"],) + _goal_cells(g) for g in goal_rows(payload)]
+    goals += [(g["goal"],) + goal_cells(g) for g in goal_rows(payload)]
     gw = [max(len(row[i]) for row in goals) for i in range(5)]
     lines += [""] + ["  ".join(c.ljust(w) for c, w in zip(row, gw)).rstrip() for row in goals]
     mem = payload["memory_N10000"]
@@ -392,23 +285,6 @@ def findings_markdown(payload: dict) -> str:
             f"{g.get('setup', {}).get('first_steps', 1000)} steps and by "
             f"{s['gain_change_after']:.1e} after {s['steps']}; the slowest observable mode of "
             f"the filter's closed loop has |λ| = {s['slowest_observable_abs_eig']:.4f} per step.")
-    return "\n".join(lines) + "\n"
-
-
-def goals_markdown(payload: dict) -> str:
-    """The goals table (target, this run's median and min–max, met or the factor missing) and
-    the FLOP sentence, as MyST markdown."""
-    lines = ["| goal at N = 1000 | target | measured (min–max) | | factor missing |",
-             "|---|---|---|---|---|"]
-    for g in goal_rows(payload):
-        target, measured, state, missing = _goal_cells(g)
-        lines.append(f"| {g['goal'].replace('x filterpy', '× filterpy')} | "
-                     f"{target.replace('>=', '≥').replace('<=', '≤')} | "
-                     f"{measured.replace('-', '–') if g['measured'] is not None else measured} | "
-                     f"{state} | {missing.replace('x', '×')} |")
-    line = flops_line(payload)
-    if line:
-        lines += ["", f"- {line}."]
     return "\n".join(lines) + "\n"
 
 

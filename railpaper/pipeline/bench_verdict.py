@@ -1,0 +1,52 @@
+"""May a bench run's ratios between engines be printed?  The machine's load, judged once.
+
+Shared by the terminal table, the JSON findings and the Performance page
+(:mod:`railpaper.pipeline.bench`, :mod:`railpaper.pipeline.bench_goals`).
+"""
+
+from __future__ import annotations
+
+WITHHELD = "withheld"
+
+
+def is_ratio(key: str) -> bool:
+    return key.startswith(("speedup_", "time_ratio_"))
+
+
+#: Most other work (cores, 1-minute average) under which ratios between engines are printed.
+OTHER_WORK_MAX = 0.5
+
+
+def ratio_verdict(machine: dict) -> tuple[bool, str]:
+    """May this run's ratios between engines be printed?  (ok, reason in one sentence).
+
+    Not when work other than the bench reached :data:`OTHER_WORK_MAX` cores at any sample of the
+    run (before, between the interleaved blocks, after): the 1-minute load average minus the
+    bench's own CPU use averaged the same way (``other_max_1min``, see
+    ``benchmarks.timing.LoadLog``).  A run that recorded only the load (older JSON) is judged by
+    the load itself against the core count (the bench's own threads count in it); a run that
+    recorded neither, never.  Why not the load alone: on a 2-core machine the bench's own two
+    threads make a load of 2.0-2.1 with nothing else running.
+    """
+    if "other_max_1min" in machine:
+        other = machine["other_max_1min"]
+        if other > OTHER_WORK_MAX:
+            return False, (f"ratios withheld: work other than the bench reached {other:.2f} "
+                           f"cores (1-minute load average {machine.get('load_max_1min', 0):.1f} "
+                           f"minus the bench's own CPU use), above {OTHER_WORK_MAX:g}, so the "
+                           "engines competed with other work for the cores; re-run "
+                           "`railpaper bench` on a quiet machine")
+        return True, (f"work other than the bench stayed at or below {max(other, 0):.2f} cores "
+                      f"(the load average reached {machine.get('load_max_1min', 0):.1f} on "
+                      f"{machine['cores']} cores, the bench's own threads included)")
+    loads = [machine[k][0] for k in ("load_before", "load_after") if k in machine]
+    if "load_max_1min" in machine:
+        loads.append(machine["load_max_1min"])
+    if not loads:
+        return False, "ratios withheld: this run did not record the machine's load"
+    top, cores = max(loads), machine["cores"]
+    if top > cores:
+        return False, (f"ratios withheld: the 1-minute load average reached {top:.1f} on "
+                       f"{cores} cores during this run, so the engines competed with other work "
+                       "for the cores; re-run `railpaper bench` on a quiet machine")
+    return True, f"the 1-minute load average stayed at or below {top:.1f} on {cores} cores"
