@@ -50,7 +50,8 @@ def lateral_problem(n_steps: int, seed: int = 0) -> dict:
     Q, R = E.filter_noise(fixed, theta, p, data.du_var_m2ps2)
     v = p["speed_kmh"] / 3.6
     A0, Ak = L.affine_terms(fixed, v)
-    fast = L.lateral_system(fixed, v, p["dt_s"], Q, R)
+    fast = L.lateral_system(fixed, v, p["dt_s"], Q, R,
+                            theta_ref=theta * 0.5 * (p["prior_low"] + p["prior_high"]))
 
     def textbook(th):                          # stacked scipy expm: the straightforward path
         A = L.a_of_theta(A0, Ak, th)

@@ -321,3 +321,24 @@ def test_affine_zoh_lane_independence_and_errors(lateral):
         zoh_affine(np.full((2, 5), np.nan), A0, Ak, B, DT)
     with pytest.raises(ValueError, match="do not fit"):
         zoh_affine(th[:, :4], A0, Ak, B, DT)
+
+
+def test_lateral_system_bits_do_not_depend_on_the_order_of_calls(lateral):
+    """With theta_ref the balancing is fixed when the system is made: a particle's matrices are
+    the same bits whichever filter called the system first and whatever its block-mates."""
+    from railpaper.experiments.rbpf_parameter_estimation import vehicle
+    fixed, theta = vehicle()
+    Q, R = 1e-12 * np.eye(16), 1e-6 * np.eye(5)
+    rng = np.random.default_rng(11)
+    a, b = theta * rng.uniform(0.5, 1.7, (40, 5)), theta * rng.uniform(0.5, 1.7, (40, 5))
+    s1 = L.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
+    s2 = L.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
+    first_a = s1(a)
+    s2(b)                                                   # another filter called first
+    second_a = s2(a[::-1])
+    assert np.array_equal(first_a.F, second_a.F[::-1])
+    assert np.array_equal(first_a.H, second_a.H[::-1])
+    A = L.a_of_theta(*L.affine_terms(fixed, SPEED), a)
+    Fr, Gr = scipy_zoh(A, L.input_matrix(), DT)
+    assert rel(first_a.F, Fr).max() < 1e-13 and rel(first_a.B, Gr).max() < 1e-13
+    np.testing.assert_allclose(first_a.H, L.measurement_matrix(A), rtol=1e-14, atol=1e-14)

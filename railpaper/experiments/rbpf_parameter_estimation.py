@@ -115,9 +115,11 @@ def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
 
 def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord):
     """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
-    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`)."""
+    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`);
+    the ZOH's balancing is that of the prior box's centre (it changes only the rounding)."""
     Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
-    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R)
+    centre = theta * 0.5 * (p["prior_low"] + p["prior_high"])       # balancing only
+    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=centre)
 
 
 def lateral_rbpf(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int,
@@ -149,7 +151,8 @@ def lateral_crlb(p, fixed, theta, record: LateralRecord) -> dict:
     for label, var, u in (("known", record.du_var_m2ps2, record.u_mps),
                           ("unknown", record.u_var_m2ps2, None)):
         Q, R = filter_noise(fixed, theta, p, var)
-        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R), theta, record.y,
+        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R, theta_ref=theta),
+                                  theta, record.y,
                                   np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), u,
                                   checkpoints=(350, p["n_steps"]))
         for c, I in info.items():

@@ -146,22 +146,36 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
     return re, float(v0 + (v1 - v0) * (-r0) / (r1 - r0))
 
 
-def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray):
+def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray,
+                   theta_ref: np.ndarray | None = None):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
     The ZOH is :func:`railpaper.sparse_zoh.zoh_affine`: Taylor on the 45 nonzeros of
     ``[A(θ) dt | B dt]`` formed straight from θ (≈ 5e-16 relative to
     :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/test_kalman_bank.py and
-    tests/test_batch_expm.py check it).  The powers-of-two balancing is fixed at the first
-    call (from its first θ) and kept, so a matrix depends only on its own θ, never on the
-    other particles of a later call.  H(θ) is formed from the same affine terms (four rows of
-    A(θ) and the yaw rate).
+    tests/test_batch_expm.py check it).  The powers-of-two balancing (an exact similarity: it
+    changes only the rounding) is that of ``A(theta_ref)``, fixed when the system is made, so a
+    matrix depends on its own θ only — not on the other particles, the order of calls or which
+    filter called first; without ``theta_ref`` it is fixed at the first call, from that call's
+    first θ.  H(θ) is formed from the same affine terms (four rows of A(θ) and the yaw rate).
+
+    Parameters
+    ----------
+    fixed : dict
+        Fixed quantities (:data:`FIXED_KEYS`, SI units).
+    speed_mps, dt_s : float
+        Vehicle speed, m/s; sample time, s.
+    Q, R : ndarray, (16, 16), (5, 5)
+        Process- and measurement-noise covariances (state and channel units squared).
+    theta_ref : array_like, (5,), optional
+        θ whose A(θ) sets the balancing (e.g. the centre of the prior box).
     """
     A0, Ak = affine_terms(fixed, speed_mps)
     B = input_matrix()
     rows = list(ACC_ROWS)
     H0, Hk = A0[rows], Ak[:, rows].reshape(len(Ak), -1)          # (4, 16), (5, 64)
-    balance = []
+    balance = [] if theta_ref is None else [
+        balance_scale(A0 + np.tensordot(np.asarray(theta_ref, float), Ak, axes=1), B, dt_s)]
 
     def system(theta: np.ndarray) -> LinearGaussianBatch:
         theta = np.atleast_2d(np.asarray(theta, float))
