@@ -59,46 +59,67 @@ def _own_cpu_s() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
-class LoadLog:
-    """1-, 5- and 15-minute load averages at labelled moments of a benchmark, and how much of
-    the 1-minute load is the benchmark itself.
+def _machine_busy_s() -> float | None:
+    """CPU seconds the whole machine spent busy (all cores; user, nice, system, irq, softirq and
+    steal — time the hypervisor gave to others), from /proc/stat; None where not available."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+    user, nice, system, _idle, _iowait, irq, softirq, steal = fields
+    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
 
-    The 1-minute load average is an exponential average (time constant 60 s) of the number of
-    runnable threads.  The benchmark's own share is the same average of its own CPU use (CPU
-    seconds per second, from ``os.times``, constant between samples), started at zero at the
-    first sample; ``other`` = load − own share is the work of everything else (including the
-    decaying tail of work that ended before the benchmark started).
+
+class LoadLog:
+    """Load averages at labelled moments of a benchmark and the work of everything else.
+
+    ``other`` (cores) between two samples is what the machine spent busy (/proc/stat) minus what
+    this process spent (``os.times``), divided by the wall time: the CPU that other processes, the
+    kernel and the hypervisor (steal) took while the benchmark ran.  Where /proc/stat is not
+    available it is estimated from the 1-minute load average instead: load minus the process's
+    own CPU use averaged the same way (60-s exponential average), which also counts the decaying
+    tail of work that ended before the benchmark started.
     """
 
     def __init__(self, clock: Callable[[], float] = time.monotonic,
                  load: Callable[[], tuple] = os.getloadavg,
-                 cpu: Callable[[], float] = _own_cpu_s):
-        self.clock, self.load, self.cpu, self.t0 = clock, load, cpu, clock()
+                 cpu: Callable[[], float] = _own_cpu_s,
+                 busy: Callable[[], float | None] = _machine_busy_s):
+        self.clock, self.load, self.cpu, self.busy, self.t0 = clock, load, cpu, busy, clock()
         self.samples: list[dict] = []
-        self._last: tuple[float, float] | None = None
+        self._last: tuple[float, float, float | None] | None = None
         self._own = 0.0
 
     def sample(self, label: str) -> None:
-        t, cpu = self.clock(), self.cpu()
+        t, cpu, busy = self.clock(), self.cpu(), self.busy()
+        load = [float(x) for x in self.load()]
+        other = None
         if self._last is not None:
             dt = t - self._last[0]
             if dt > 0:
                 rate = (cpu - self._last[1]) / dt                 # cores used since last sample
                 decay = math.exp(-dt / LOAD_TAU_S)
                 self._own = self._own * decay + rate * (1.0 - decay)
-        self._last = (t, cpu)
-        load = [float(x) for x in self.load()]
+                if busy is not None and self._last[2] is not None:
+                    other = max(0.0, (busy - self._last[2]) / dt - rate)
+        if other is None and busy is None:
+            other = load[0] - self._own
+        self._last = (t, cpu, busy)
         self.samples.append(dict(label=label, t_s=round(t - self.t0, 3), load=load,
                                  own_1min=round(self._own, 3),
-                                 other_1min=round(load[0] - self._own, 3)))
+                                 other_cores=None if other is None else round(other, 3)))
 
     def as_dict(self) -> dict:
         """``load_before``, ``load_after`` (the first and last samples, 1/5/15 min), every sample,
-        the largest 1-minute load seen (the bench's own threads count in it) and the largest
-        1-minute load of other work (``other_max_1min``)."""
+        the largest 1-minute load seen (the bench's own threads count in it) and the most cores
+        other work took between two samples (``other_max_cores``)."""
         if not self.samples:
             return {}
-        return dict(load_before=self.samples[0]["load"], load_after=self.samples[-1]["load"],
-                    load_samples=self.samples,
-                    load_max_1min=max(s["load"][0] for s in self.samples),
-                    other_max_1min=max(s["other_1min"] for s in self.samples))
+        others = [s["other_cores"] for s in self.samples if s["other_cores"] is not None]
+        out = dict(load_before=self.samples[0]["load"], load_after=self.samples[-1]["load"],
+                   load_samples=self.samples,
+                   load_max_1min=max(s["load"][0] for s in self.samples))
+        if others:
+            out["other_max_cores"] = max(others)
+        return out

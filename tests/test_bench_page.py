@@ -207,22 +207,27 @@ def test_goals_say_met_or_the_factor_missing_and_withhold_busy_ratios():
 
 
 def test_load_log_separates_the_bench_from_other_work():
-    """LoadLog's own share is the 60-s exponential average of the process's CPU use: a bench
-    using 2 cores for 120 s reaches 2(1 - e^-2) = 1.73, and with a load of 2.05 the other work
-    is 0.32 cores (ratios printed); with a load of 3.0, 1.27 cores (withheld)."""
+    """Other work between two samples = machine busy CPU (/proc/stat) − the bench's own CPU, per
+    second: a bench using 2 cores of a machine busy 2.1 cores leaves 0.1 (ratios printed), one
+    busy 2.8 leaves 0.8 (withheld).  Without /proc/stat: the load average minus the 60-s
+    exponential average of the bench's CPU use, 2(1 − e^-2) = 1.73 after 120 s at 2 cores."""
     import math
 
     from benchmarks.timing import LoadLog
-    for load, printed in ((2.05, True), (3.0, False)):
+    for machine_busy, printed in ((2.1, True), (2.8, False)):
         clock, cpu = iter([0.0, 0.0, 120.0]), iter([0.0, 240.0])
-        log = LoadLog(clock=lambda: next(clock), load=lambda: (load, 1.0, 1.0),
-                      cpu=lambda: next(cpu))
+        busy = iter([0.0, 120 * machine_busy])
+        log = LoadLog(clock=lambda: next(clock), load=lambda: (2.05, 1.0, 1.0),
+                      cpu=lambda: next(cpu), busy=lambda: next(busy))
         log.sample("start")
         log.sample("end")
         d = log.as_dict()
-        own = 2 * (1 - math.exp(-2))
-        assert d["load_samples"][-1]["own_1min"] == pytest.approx(own, abs=1e-3)
-        assert d["other_max_1min"] == pytest.approx(max(load, load - own), abs=1e-3)
-        machine = dict(cores=2, **d)
-        machine["other_max_1min"] = load - own                   # the start sample aside
-        assert ratio_verdict(machine)[0] is printed
+        assert d["other_max_cores"] == pytest.approx(machine_busy - 2.0, abs=1e-9)
+        assert ratio_verdict(dict(cores=2, **d))[0] is printed
+    clock, cpu = iter([0.0, 0.0, 120.0]), iter([0.0, 240.0])
+    log = LoadLog(clock=lambda: next(clock), load=lambda: (2.05, 1.0, 1.0),
+                  cpu=lambda: next(cpu), busy=lambda: None)
+    log.sample("start")
+    log.sample("end")
+    own = 2 * (1 - math.exp(-2))
+    assert log.as_dict()["load_samples"][-1]["other_cores"] == pytest.approx(2.05 - own, abs=1e-3)

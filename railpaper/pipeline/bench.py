@@ -229,11 +229,13 @@ def busy_note(machine: dict) -> str:
     loads = [machine[k][0] for k in ("load_before", "load_after") if k in machine]
     if not loads:
         return "The machine's load was not recorded by this run; ratios are withheld."
+    key = next((k for k in ("other_max_cores", "other_max_1min") if k in machine), None)
+    other_note = ("" if key is None else
+                  f"; work other than the bench at most {max(machine[key], 0):.2f} cores")
     text = (f"Load average (1 min) {loads[0]:.1f} before and {loads[-1]:.1f} after the run"
             + (f", at most {machine['load_max_1min']:.1f} during it"
                if "load_max_1min" in machine else "") + f", on {machine['cores']} cores"
-            + (f"; work other than the bench at most {max(machine['other_max_1min'], 0):.2f} "
-               "cores" if "other_max_1min" in machine else ""))
+            + other_note)
     if not ratio_verdict(machine)[0]:
         return (f"**The machine was busy**: {text}. Other work competed for the cores, so these "
                 "rates are low and no ratio between engines is printed; re-run `railpaper bench` "

@@ -13,27 +13,30 @@ def is_ratio(key: str) -> bool:
     return key.startswith(("speedup_", "time_ratio_"))
 
 
-#: Most other work (cores, 1-minute average) under which ratios between engines are printed.
+#: Most cores other work may take (between two samples of a run) for ratios to be printed.
 OTHER_WORK_MAX = 0.5
 
 
 def ratio_verdict(machine: dict) -> tuple[bool, str]:
     """May this run's ratios between engines be printed?  (ok, reason in one sentence).
 
-    Not when work other than the bench reached :data:`OTHER_WORK_MAX` cores at any sample of the
-    run (before, between the interleaved blocks, after): the 1-minute load average minus the
-    bench's own CPU use averaged the same way (``other_max_1min``, see
-    ``benchmarks.timing.LoadLog``).  A run that recorded only the load (older JSON) is judged by
-    the load itself against the core count (the bench's own threads count in it); a run that
-    recorded neither, never.  Why not the load alone: on a 2-core machine the bench's own two
-    threads make a load of 2.0-2.1 with nothing else running.
+    Not when work other than the bench took more than :data:`OTHER_WORK_MAX` cores between any
+    two samples of the run (start, between the interleaved blocks, end): the machine's busy CPU
+    time (/proc/stat, steal included) minus the bench's own, per second (``other_max_cores``, see
+    ``benchmarks.timing.LoadLog``; JSON of the previous version holds a load-average estimate,
+    ``other_max_1min``, judged the same way).  A run that recorded only the load (older JSON) is
+    judged by the load itself against the core count (the bench's own threads count in it); a
+    run that recorded neither, never.  Why not the load alone: on a 2-core machine the bench's
+    own two threads make a load of 2.0-2.1 with nothing else running, and the load average still
+    holds the tail of work that ended a minute before the bench started (the chapters, in a
+    book build).
     """
-    if "other_max_1min" in machine:
-        other = machine["other_max_1min"]
+    key = next((k for k in ("other_max_cores", "other_max_1min") if k in machine), None)
+    if key is not None:
+        other = machine[key]
         if other > OTHER_WORK_MAX:
-            return False, (f"ratios withheld: work other than the bench reached {other:.2f} "
-                           f"cores (1-minute load average {machine.get('load_max_1min', 0):.1f} "
-                           f"minus the bench's own CPU use), above {OTHER_WORK_MAX:g}, so the "
+            return False, (f"ratios withheld: work other than the bench took {other:.2f} cores "
+                           f"between two of its samples (above {OTHER_WORK_MAX:g}), so the "
                            "engines competed with other work for the cores; re-run "
                            "`railpaper bench` on a quiet machine")
         return True, (f"work other than the bench stayed at or below {max(other, 0):.2f} cores "
