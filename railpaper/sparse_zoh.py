@@ -277,55 +277,89 @@ def zoh_sparse(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | No
     return F, G
 
 
-def zoh_affine(theta: np.ndarray, A0: np.ndarray, Ak: np.ndarray, B: np.ndarray, dt_s: float,
-               scale: np.ndarray | None = None, tol: float = TOL, kmax: int = KMAX
-               ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`zoh_sparse` of ``A(θ_i) = A0 + Σ_k θ_ik A_k`` straight from the parameters.
+def affine_balance(theta: np.ndarray, A0: np.ndarray, Ak: np.ndarray, B: np.ndarray,
+                   dt_s: float) -> np.ndarray:
+    """:func:`balance_scale` of ``A(θ) = A0 + Σ_k θ_k A_k`` for one θ (d,)."""
+    return balance_scale(A0 + np.tensordot(np.asarray(theta, float), Ak, axes=1), B, dt_s)
 
-    ``A(θ)`` is never built: its balanced values ``(A0 + Σ θ_k A_k) dt`` are formed on the
-    union pattern of ``A0``, the ``A_k`` and ``B`` (found once, from the d + 2 matrices, not by
-    scanning N matrices), lane by lane, and fed to the same Horner/squaring kernel.
+
+def _checked_theta(theta: np.ndarray, n_theta: int) -> np.ndarray:
+    """θ as a contiguous (N, n_theta) float array; a wrong shape or a NaN/inf is refused."""
+    theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
+    if theta.ndim != 2 or theta.shape[1] != n_theta:
+        raise ValueError(f"zoh_affine: shapes theta {theta.shape} and {n_theta} affine terms "
+                         "do not fit")
+    if not np.all(np.isfinite(theta)):
+        raise ValueError("zoh_affine: theta has NaN or inf entries")
+    return theta
+
+
+class AffineZOH:
+    """:func:`zoh_sparse` of ``A(θ_i) = A0 + Σ_k θ_ik A_k``, prepared once for fixed matrices.
+
+    ``A(θ)`` is never built: the union pattern of ``A0``, the ``A_k`` and ``B`` (found from the
+    d + 2 matrices, not by scanning N) and the balanced values ``A0 dt``, ``A_k dt`` on it are
+    formed here, once; a call forms ``(A0 + Σ θ_k A_k) dt`` on the pattern lane by lane and runs
+    the same Horner/squaring kernel.
 
     Parameters
     ----------
-    theta : ndarray, shape (N, d)
-        Parameters (units of the model's θ).
     A0 : ndarray, shape (n, n)
         Constant part of A, 1/s.
     Ak : ndarray, shape (d, n, n)
         ``∂A/∂θ_k``, 1/s per unit of θ_k.
     B : ndarray, shape (n, m)
         Continuous input matrix (shared).
-    dt_s, scale, tol, kmax
-        As for :func:`zoh_sparse` (default ``scale``: balancing of ``A(θ_0)``).
+    dt_s : float
+        Sample time, s.
+    scale : ndarray, shape (n+m,)
+        Balancing diagonal (powers of two), e.g. :func:`affine_balance` of a reference θ.
+    tol, kmax
+        As for :func:`zoh_sparse`.
+    """
+
+    def __init__(self, A0: np.ndarray, Ak: np.ndarray, B: np.ndarray, dt_s: float,
+                 scale: np.ndarray, tol: float = TOL, kmax: int = KMAX):
+        A0, Ak, B = (np.asarray(M, float) for M in (A0, Ak, B))
+        n, m = A0.shape[0], B.shape[1]
+        if Ak.shape[1:] != A0.shape or B.shape[0] != n:
+            raise ValueError(f"zoh_affine: shapes A0 {A0.shape}, Ak {Ak.shape}, B {B.shape} "
+                             "do not fit")
+        self.n, self.m, self.n_theta = n, m, len(Ak)
+        self.d = np.asarray(scale, float)
+        self.tol, self.kmax = float(tol), int(kmax)
+        X0 = np.concatenate([A0, B], axis=1)                      # (n, n+m)
+        Xk = np.concatenate([Ak, np.zeros((len(Ak), n, m))], axis=2)
+        rows, cols = np.nonzero((X0 != 0) | (Xk != 0).any(axis=0))     # row-major: CSR order
+        self.rowptr = np.searchsorted(rows, np.arange(n + 1)).astype(np.int64)
+        balance = dt_s * self.d[cols] / self.d[rows]               # exact (powers of two)
+        self.xa = np.ascontiguousarray(X0[rows, cols] * balance)
+        self.xk = np.ascontiguousarray(Xk[:, rows, cols] * balance)
+        self.rows, self.cols = rows.astype(np.int64), cols.astype(np.int64)
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(F, G)``: ``e^{A(θ_i) dt}`` (N, n, n) and ``∫₀^dt e^{A(θ_i)s} ds B`` (N, n, m)."""
+        theta = _checked_theta(theta, self.n_theta)
+        F, G = np.empty((len(theta), self.n, self.n)), np.empty((len(theta), self.n, self.m))
+        _zoh_affine_blocks(theta, self.xa, self.xk, self.n, self.tol, self.kmax, self.d,
+                           self.rows, self.cols, self.rowptr, F, G)
+        return F, G
+
+
+def zoh_affine(theta: np.ndarray, A0: np.ndarray, Ak: np.ndarray, B: np.ndarray, dt_s: float,
+               scale: np.ndarray | None = None, tol: float = TOL, kmax: int = KMAX
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """One call of :class:`AffineZOH` (default ``scale``: :func:`affine_balance` of θ_0).
 
     Returns
     -------
     F : ndarray, shape (N, n, n)
     G : ndarray, shape (N, n, m)
     """
-    theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
-    A0, Ak, B = (np.asarray(M, float) for M in (A0, Ak, B))
-    n, m = A0.shape[0], B.shape[1]
-    if Ak.shape != (theta.shape[1],) + A0.shape or B.shape[0] != n:
-        raise ValueError(f"zoh_affine: shapes theta {theta.shape}, A0 {A0.shape}, "
-                         f"Ak {Ak.shape}, B {B.shape} do not fit")
-    if not np.all(np.isfinite(theta)):
-        raise ValueError("zoh_affine: theta has NaN or inf entries")
+    theta = _checked_theta(theta, len(Ak))
     if scale is None:
-        scale = balance_scale(A0 + np.tensordot(theta[0], Ak, axes=1), B, dt_s)
-    d = np.asarray(scale, float)
-    X0 = np.concatenate([A0, B], axis=1)                      # (n, n+m)
-    Xk = np.concatenate([Ak, np.zeros((len(Ak), n, m))], axis=2)
-    rows, cols = np.nonzero((X0 != 0) | (Xk != 0).any(axis=0))     # row-major: CSR order
-    rowptr = np.searchsorted(rows, np.arange(n + 1)).astype(np.int64)
-    balance = dt_s * d[cols] / d[rows]                         # exact (powers of two)
-    xa = np.ascontiguousarray(X0[rows, cols] * balance)
-    xk = np.ascontiguousarray(Xk[:, rows, cols] * balance)
-    F, G = np.empty((len(theta), n, n)), np.empty((len(theta), n, m))
-    _zoh_affine_blocks(theta, xa, xk, n, float(tol), int(kmax), d, rows.astype(np.int64),
-                       cols.astype(np.int64), rowptr, F, G)
-    return F, G
+        scale = affine_balance(theta[0], A0, Ak, B, dt_s)
+    return AffineZOH(A0, Ak, B, dt_s, scale, tol, kmax)(theta)
 
 
 def term_counts(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | None = None,

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from railpaper.sparse_zoh import balance_scale, zoh_affine
+from railpaper.sparse_zoh import AffineZOH, affine_balance
 from railpaper.discretise import simulate_zoh, zoh
 from railpaper.linear_gaussian import LinearGaussianBatch
 
@@ -150,7 +150,7 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
                    theta_ref: np.ndarray | None = None):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
-    The ZOH is :func:`railpaper.sparse_zoh.zoh_affine`: Taylor on the 45 nonzeros of
+    The ZOH is :class:`railpaper.sparse_zoh.AffineZOH` (prepared once per system): Taylor on the 45 nonzeros of
     ``[A(θ) dt | B dt]`` formed straight from θ (≈ 5e-16 relative to
     :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/test_kalman_bank.py and
     tests/test_batch_expm.py check it).  The powers-of-two balancing (an exact similarity: it
@@ -174,14 +174,14 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
     B = input_matrix()
     rows = list(ACC_ROWS)
     H0, Hk = A0[rows], Ak[:, rows].reshape(len(Ak), -1)          # (4, 16), (5, 64)
-    balance = [] if theta_ref is None else [
-        balance_scale(A0 + np.tensordot(np.asarray(theta_ref, float), Ak, axes=1), B, dt_s)]
+    prepared = [] if theta_ref is None else [   # the ZOH's pattern and balancing, made once
+        AffineZOH(A0, Ak, B, dt_s, affine_balance(theta_ref, A0, Ak, B, dt_s))]
 
     def system(theta: np.ndarray) -> LinearGaussianBatch:
         theta = np.atleast_2d(np.asarray(theta, float))
-        if not balance:
-            balance.append(balance_scale(A0 + np.tensordot(theta[0], Ak, axes=1), B, dt_s))
-        F, G = zoh_affine(theta, A0, Ak, B, dt_s, scale=balance[0])
+        if not prepared:
+            prepared.append(AffineZOH(A0, Ak, B, dt_s, affine_balance(theta[0], A0, Ak, B, dt_s)))
+        F, G = prepared[0](theta)
         H = np.zeros((len(theta), len(CHANNELS), N_STATES))
         H[:, :4] = H0 + (theta @ Hk).reshape(len(theta), 4, N_STATES)
         H[:, 4, YAW_RATE_STATE] = 1.0
