@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from railpaper.pipeline.bench_goals import flops_line, goal_cells, goal_rows, goals_markdown
-from railpaper.pipeline.bench_verdict import WITHHELD, is_ratio, ratio_verdict
+from railpaper.pipeline.bench_verdict import WITHHELD, is_ratio, other_work, ratio_verdict
 from railpaper.pipeline.chapters import REPO_DIR, PipelineError
 
 REAL_TIME_STEPS_PER_S = 1000.0          # paper 003's lateral model is sampled at 1 kHz
@@ -229,9 +229,9 @@ def busy_note(machine: dict) -> str:
     loads = [machine[k][0] for k in ("load_before", "load_after") if k in machine]
     if not loads:
         return "The machine's load was not recorded by this run; ratios are withheld."
-    key = next((k for k in ("other_max_cores", "other_max_1min") if k in machine), None)
-    other_note = ("" if key is None else
-                  f"; work other than the bench at most {max(machine[key], 0):.2f} cores")
+    other = other_work(machine)
+    other_note = ("" if other is None else
+                  f"; work other than the bench at most {max(other, 0):.2f} cores")
     text = (f"Load average (1 min) {loads[0]:.1f} before and {loads[-1]:.1f} after the run"
             + (f", at most {machine['load_max_1min']:.1f} during it"
                if "load_max_1min" in machine else "") + f", on {machine['cores']} cores"

@@ -17,6 +17,13 @@ def is_ratio(key: str) -> bool:
 OTHER_WORK_MAX = 0.5
 
 
+def other_work(machine: dict) -> float | None:
+    """The most cores other work took during the run (``other_max_cores``, or the load-average
+    estimate ``other_max_1min`` of the previous version), None where not recorded."""
+    key = next((k for k in ("other_max_cores", "other_max_1min") if k in machine), None)
+    return None if key is None else machine[key]
+
+
 def ratio_verdict(machine: dict) -> tuple[bool, str]:
     """May this run's ratios between engines be printed?  (ok, reason in one sentence).
 
@@ -31,9 +38,8 @@ def ratio_verdict(machine: dict) -> tuple[bool, str]:
     holds the tail of work that ended a minute before the bench started (the chapters, in a
     book build).
     """
-    key = next((k for k in ("other_max_cores", "other_max_1min") if k in machine), None)
-    if key is not None:
-        other = machine[key]
+    other = other_work(machine)
+    if other is not None:
         if other > OTHER_WORK_MAX:
             return False, (f"ratios withheld: work other than the bench took {other:.2f} cores "
                            f"between two of its samples (above {OTHER_WORK_MAX:g}), so the "
