@@ -29,7 +29,7 @@ book: venv
 book-quick: venv
 	$(BIN)/railpaper build --quick
 
-# The rendering test (tests/test_book.py) opens the built pages in headless Chromium: Debian's
+# The rendering test (tests/pipeline/test_book.py) opens the built pages in headless Chromium: Debian's
 # package is installed when missing and we are root (or have sudo); otherwise one line says how.
 chromium:
 	@if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then :; \

@@ -154,7 +154,7 @@ def cmd_build(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from railpaper.pipeline.bench import run_bench
+    from railpaper.bench.report import run_bench
     if args.out is not None:                      # refuse before a minute of benchmarking
         if args.out.suffix != ".json":
             raise ValueError(f"bench --out {args.out}: expected a .json file name")

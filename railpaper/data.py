@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+from railpaper.paths import DATA_DIR
+
 
 #: Units whose values must be strictly positive (mass, inertia, stiffness, damping, speed,
 #: length, time, frequency, force, spectral constants).

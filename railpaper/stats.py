@@ -156,3 +156,33 @@ def paired_trend(values, level: float = LEVEL) -> Trend:
     m = rising + falling
     p = 1.0 if m == 0 else float(_st.binomtest(rising, m, 0.5).pvalue)
     return Trend(median_interval(rhos, level), rising, falling, p)
+
+
+def rate(hits, level: float = LEVEL) -> Estimate:
+    """Rate of True among the records' flags with its Clopper–Pearson interval."""
+    hits = np.asarray(hits, bool).ravel()
+    return proportion_interval(int(hits.sum()), hits.size, level)
+
+
+def max_abs_bias(errors, level: float = LEVEL) -> Estimate:
+    """Largest |mean| over the columns of ``errors`` with a simultaneous interval.
+
+    Each column's mean gets a Student t interval at level ``1 − (1 − level)/d`` (Bonferroni), so
+    all d intervals hold together with probability >= ``level``; the interval of
+    ``max_j |μ_j|`` is then [max_j distance of interval j from 0, max_j largest |end| of
+    interval j].
+
+    Parameters
+    ----------
+    errors : array_like, shape (n, d)
+        One row per record, one column per parameter (e.g. final relative errors).
+    level : float
+        Simultaneous confidence level.
+    """
+    x = np.asarray(errors, float)
+    if x.ndim != 2 or x.shape[0] < 2:
+        raise ValueError(f"max_abs_bias needs shape (n >= 2, d), got {x.shape}")
+    per = [mean_interval(col, 1.0 - (1.0 - level) / x.shape[1]) for col in x.T]
+    return Estimate(max(abs(e.value) for e in per),
+                    max(max(0.0, e.low, -e.high) for e in per),
+                    max(max(abs(e.low), abs(e.high)) for e in per), x.shape[0], level)

@@ -1,9 +1,17 @@
-"""The package's layers import only downwards (read from the source with ``ast``, nothing run).
+"""The package's architecture, read from the source with ``ast`` (nothing run).
 
-Layers, lowest first: physics (``railpaper/*.py`` modules such as ``discretise``, ``track``,
-``linear_gaussian``) -> ``models`` and ``estimators`` (side by side: neither imports the other) ->
-``experiments`` -> ``pipeline`` -> ``cli``.  Every ``import``/``from … import`` is checked,
-including the ones inside functions.
+Layers, lowest first::
+
+    physics (railpaper/*.py: contact, track, discretise, data, stats, settling, paths, ...)
+      -> engine (batched linear-Gaussian machinery)
+      -> models | estimators (side by side: neither imports the other)
+      -> experiments (shared parts; one package per chapter, chapters never import each other)
+      -> bench -> pipeline -> cli -> __main__
+
+Every ``import``/``from … import`` counts, including the ones inside functions; the tests below
+also fail on an import cycle among ``railpaper`` modules, on an import of ``railpaper`` inside a
+function outside ``cli.py`` (the usual way to hide a cycle or an upward import), on loading code
+by file path (``spec_from_file_location``), and on an upward import inside a chapter package.
 """
 
 from __future__ import annotations
@@ -17,8 +25,16 @@ PACKAGE = Path(__file__).resolve().parents[1] / "railpaper"
 
 #: Layer rank of each top-level part of the package; equal ranks of different parts (models,
 #: estimators) may not import each other.
-RANK = {"physics": 0, "models": 1, "estimators": 1, "experiments": 2, "pipeline": 3, "cli": 4,
-        "__main__": 5}
+RANK = {"physics": 0, "engine": 1, "models": 2, "estimators": 2, "experiments": 3, "bench": 4,
+        "pipeline": 5, "cli": 6, "__main__": 7}
+
+#: Order of a chapter package's modules: a module may import only modules of lower rank.  The
+#: chapter's studies (every module not named here) sit between ``result`` and ``evidence``;
+#: ``figures`` and ``tables`` read the result (and ``spec``, the shared ``display``), never the
+#: computation.
+CHAPTER_RANK = {"spec": 0, "result": 1, "evidence": 3, "experiment": 4, "tables": 5,
+                "figures": 6, "__init__": 7}
+STUDY_RANK = 2
 
 
 def part_of(module: str) -> str | None:
@@ -31,83 +47,201 @@ def part_of(module: str) -> str | None:
     return bits[1] if bits[1] in RANK else "physics"
 
 
-def imported_modules(path: Path, package: str) -> list[tuple[int, str]]:
-    """(line, dotted module) of every import in the file at ``path`` (module ``package``)."""
+def module_name(path: Path, package_dir: Path) -> str:
+    rel = path.relative_to(package_dir.parent).with_suffix("")
+    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    return ".".join(parts)
+
+
+def imports(path: Path, package_dir: Path) -> list[tuple[int, str, bool]]:
+    """(line, dotted module, inside a function) of every import in the file at ``path``."""
     tree = ast.parse(path.read_text(), filename=str(path))
+    dotted = module_name(path, package_dir)
+    package = dotted if path.name == "__init__.py" else dotted.rsplit(".", 1)[0]
+    in_function = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            in_function |= {id(n) for n in ast.walk(node) if n is not node}
     found = []
     for node in ast.walk(tree):
+        inner = id(node) in in_function
         if isinstance(node, ast.Import):
-            found += [(node.lineno, alias.name) for alias in node.names]
+            found += [(node.lineno, alias.name, inner) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             if node.level:                      # relative import: resolve against the package
                 base = package.split(".")[: len(package.split(".")) - node.level + 1]
                 mod = ".".join(base + ([node.module] if node.module else []))
             else:
                 mod = node.module or ""
-            found.append((node.lineno, mod))
-            # ``from railpaper import models`` / ``from railpaper.pipeline import x``: the names
-            # may be sub-packages or modules, so each counts as an import of mod.name
-            found += [(node.lineno, f"{mod}.{alias.name}") for alias in node.names
-                      if mod == "railpaper"]
+            found.append((node.lineno, mod, inner))
+            # ``from railpaper import models`` / ``from railpaper.engine import rbpf``: a name may
+            # be a sub-package or a module, so each counts as an import of mod.name as well
+            found += [(node.lineno, f"{mod}.{alias.name}", inner) for alias in node.names]
     return found
 
 
+def modules(package_dir: Path) -> dict[str, Path]:
+    return {module_name(p, package_dir): p for p in sorted(package_dir.rglob("*.py"))}
+
+
+def import_graph(package_dir: Path) -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (a name that is a module counts as one)."""
+    known = modules(package_dir)
+    graph = {}
+    for name, path in known.items():
+        targets = set()
+        for _, mod, _ in imports(path, package_dir):
+            # ``import a.b.c`` also imports a and a.b; count the deepest module that exists
+            while mod and mod not in known:
+                mod = mod.rsplit(".", 1)[0] if "." in mod else ""
+            if mod and mod != name and not name.startswith(mod + "."):
+                targets.add(mod)                # a package's own parents are imported first anyway
+        graph[name] = targets
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan), each sorted."""
+    index, low, on_stack, stack, out = {}, {}, set(), [], []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def chapter_of(module: str) -> tuple[str, str] | None:
+    """(chapter package, module within it) for ``railpaper.experiments.<chapter>.<module>``."""
+    bits = module.split(".")
+    if len(bits) >= 3 and bits[:2] == ["railpaper", "experiments"]:
+        return bits[2], (bits[3] if len(bits) > 3 else "__init__")
+    return None
+
+
 def violations(package_dir: Path) -> list[str]:
-    """Every upward or sideways import under ``package_dir`` (a directory named railpaper)."""
+    """Every upward or sideways import, hidden import and path load under ``package_dir``."""
     bad = []
-    for path in sorted(package_dir.rglob("*.py")):
-        rel = path.relative_to(package_dir.parent).with_suffix("")
-        dotted = ".".join(rel.parts)
-        if rel.name == "__init__":
-            dotted = ".".join(rel.parts[:-1])
+    known = modules(package_dir)
+    chapters = {p.parent.name for p in package_dir.glob("experiments/*/__init__.py")}
+    for dotted, path in known.items():
+        where = path.relative_to(package_dir.parent)
         own = part_of(dotted)
-        package = dotted if rel.name == "__init__" else dotted.rsplit(".", 1)[0]
-        for line, mod in imported_modules(path, package):
+        if "spec_from_file_location" in path.read_text():
+            bad.append(f"{where}: loads code by file path (spec_from_file_location)")
+        for line, mod, inner in imports(path, package_dir):
             other = part_of(mod)
-            if other is None or other == own or mod == "railpaper":
+            if other is None or mod == "railpaper":
                 continue
-            if RANK[other] >= RANK[own]:
-                bad.append(f"{path.relative_to(package_dir.parent)}:{line}: {own} imports "
-                           f"{mod} ({other})")
+            if inner and own != "cli":
+                bad.append(f"{where}:{line}: imports {mod} inside a function")
+            if other != own and RANK[other] >= RANK[own]:
+                bad.append(f"{where}:{line}: {own} imports {mod} ({other})")
+            mine, theirs = chapter_of(dotted), chapter_of(mod)
+            if mine and theirs and mine[0] in chapters and theirs[0] in chapters:
+                if mine[0] != theirs[0]:
+                    bad.append(f"{where}:{line}: chapter {mine[0]} imports chapter {theirs[0]}")
+                elif theirs[1] != "__init__" and theirs[1] != mine[1]:
+                    rank = CHAPTER_RANK.get(mine[1], STUDY_RANK)
+                    if CHAPTER_RANK.get(theirs[1], STUDY_RANK) >= rank and not (
+                            rank == STUDY_RANK == CHAPTER_RANK.get(theirs[1], STUDY_RANK)):
+                        bad.append(f"{where}:{line}: {mine[1]} imports {theirs[1]} of its "
+                                   f"chapter (flow: spec <- result <- studies <- evidence <- "
+                                   f"experiment; tables, figures read result and spec)")
+    for component in cycles(import_graph(package_dir)):
+        bad.append("import cycle: " + " -> ".join(component))
     return bad
 
 
-def test_no_upward_or_sideways_imports():
+def test_no_upward_sideways_hidden_or_circular_imports():
     found = violations(PACKAGE)
-    assert found == [], "layer violations:\n" + "\n".join(found)
+    assert found == [], "architecture violations:\n" + "\n".join(found)
 
 
 def test_the_walk_sees_every_layer():
-    parts = {part_of(".".join(("railpaper",) + p.relative_to(PACKAGE).with_suffix("").parts))
-             for p in PACKAGE.rglob("*.py")}
-    assert {"physics", "models", "estimators", "experiments", "pipeline", "cli"} <= parts
+    parts = {part_of(name) for name in modules(PACKAGE)}
+    assert set(RANK) <= parts
+
+
+def _planted_package(tmp_path: Path) -> Path:
+    pkg = tmp_path / "railpaper"
+    for sub in ("engine", "models", "estimators", "experiments", "experiments/ch", "bench",
+                "pipeline"):
+        (pkg / sub).mkdir(parents=True)
+        (pkg / sub / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "linear.py").write_text("import numpy\n")
+    (pkg / "cli.py").write_text("def main():\n    from railpaper.pipeline import ok\n")
+    (pkg / "pipeline" / "ok.py").write_text("from railpaper.bench import ok\n")
+    (pkg / "bench" / "ok.py").write_text("from railpaper.experiments.ch import experiment\n")
+    (pkg / "engine" / "ok.py").write_text("from railpaper.linear import X\nfrom railpaper import linear\n")
+    (pkg / "models" / "ok.py").write_text("from railpaper.engine.ok import X\n")
+    (pkg / "estimators" / "ok.py").write_text("from . import kalman\nfrom railpaper.engine import ok\n")
+    (pkg / "estimators" / "kalman.py").write_text("import numpy\n")
+    (pkg / "experiments" / "ch" / "spec.py").write_text("from railpaper.models import ok\n")
+    (pkg / "experiments" / "ch" / "result.py").write_text("from . import spec\n")
+    (pkg / "experiments" / "ch" / "toy.py").write_text("from .result import R\n")
+    (pkg / "experiments" / "ch" / "walk.py").write_text("from .toy import T\n")
+    (pkg / "experiments" / "ch" / "evidence.py").write_text("from .toy import T\n")
+    (pkg / "experiments" / "ch" / "experiment.py").write_text("from .evidence import E\n")
+    (pkg / "experiments" / "ch" / "figures.py").write_text("from .result import R\n")
+    return pkg
 
 
 @pytest.mark.parametrize("where, source", [
     ("models/m.py", "from railpaper.estimators.kalman import predict\n"),
     ("models/m.py", "import railpaper.experiments.base\n"),
-    ("estimators/e.py", "def f():\n    from railpaper.models import lateral_16state\n"),
+    ("engine/e.py", "from railpaper.models import ok\n"),
     ("estimators/e.py", "from railpaper import models\n"),
     ("estimators/e.py", "from ..experiments import base\n"),
     ("experiments/x.py", "from railpaper.pipeline.chapters import chapter_spec\n"),
+    ("experiments/x.py", "from railpaper.bench import ok\n"),
+    ("bench/b.py", "from railpaper.pipeline import ok\n"),
     ("experiments/x.py", "from railpaper.cli import main\n"),
-    ("discretise.py", "from railpaper.estimators.kalman import predict\n"),
+    ("linear2.py", "from railpaper.engine.ok import X\n"),
     ("pipeline/p.py", "from railpaper import cli\n"),
+    ("engine/hidden.py", "def f():\n    from railpaper.engine import ok\n"),
+    ("pipeline/load.py", "import importlib.util\nS = importlib.util.spec_from_file_location\n"),
+    ("experiments/ch/toy.py", "from .evidence import E\n"),
+    ("experiments/ch/result.py", "from .toy import T\n"),
+    ("experiments/ch/figures.py", "from .evidence import E\n"),
+    ("experiments/ch/spec.py", "from railpaper.experiments.ch.result import R\n"),
 ])
 def test_a_planted_violation_is_found(tmp_path, where, source):
-    pkg = tmp_path / "railpaper"
-    for sub in ("models", "estimators", "experiments", "pipeline"):
-        (pkg / sub).mkdir(parents=True)
-        (pkg / sub / "__init__.py").write_text("")
-    (pkg / "__init__.py").write_text("")
-    (pkg / "linear_gaussian.py").write_text("import numpy\n")
-    (pkg / "models" / "ok.py").write_text("from railpaper.linear_gaussian import X\n"
-                                          "from railpaper import contact\n")
-    (pkg / "estimators" / "ok.py").write_text("from railpaper.estimators.kalman import predict\n"
-                                              "from . import kalman\n")
+    pkg = _planted_package(tmp_path)
     assert violations(pkg) == []
     (pkg / where).write_text(source)
-    assert len(violations(pkg)) == 1
+    assert len(violations(pkg)) >= 1
+
+
+def test_a_planted_cycle_is_found(tmp_path):
+    pkg = _planted_package(tmp_path)
+    (pkg / "engine" / "a.py").write_text("from railpaper.engine import b\n")
+    (pkg / "engine" / "b.py").write_text("from railpaper.engine.a import X\n")
+    found = violations(pkg)
+    assert found == ["import cycle: railpaper.engine.a -> railpaper.engine.b"]
 
 
 def sys_path_uses(package_dir: Path) -> list[str]:

@@ -4,7 +4,7 @@ covariances do not depend on the data, for many records at once.
 For ``x_k = F x_{k-1} + w_k`` (``w ~ N(0, Q)``), ``y_k = H x_k + v_k`` (``v ~ N(0, R)``) and the
 prior ``x_0 ~ N(m_0, P_0)`` of the first measured state, the filter's gains and covariances are
 the same for every record.  :func:`gains` computes them once per model of a batch (leading axis G
-of F, Q, R, P_0) with the covariance steps of :mod:`railpaper.estimators.kalman` (Joseph-form
+of F, Q, R, P_0) with the covariance steps of :mod:`railpaper.engine.kalman` (Joseph-form
 update), compiled; :func:`filter_means` and :func:`smoother_means` then apply them to S records
 per model in compiled loops:
 
@@ -129,8 +129,8 @@ def gains(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.nda
           n_steps: int) -> Gains:
     """Gains of the filter and the smoother of G models for ``n_steps`` measurements.
 
-    The covariance recursion is that of :func:`railpaper.estimators.kalman.update` (Joseph form,
-    symmetrised) and :func:`~railpaper.estimators.kalman.predict`, compiled and tested equal to
+    The covariance recursion is that of :func:`railpaper.engine.kalman.update` (Joseph form,
+    symmetrised) and :func:`~railpaper.engine.kalman.predict`, compiled and tested equal to
     them: the library's generic batched steps take ~0.3 ms each, too slow for 20 000-step records.
 
     Parameters

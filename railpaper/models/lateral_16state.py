@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from railpaper.sparse_zoh import AffineZOH, affine_balance
+from railpaper.engine.sparse_zoh import AffineZOH, affine_balance
 from railpaper.discretise import simulate_zoh, zoh
-from railpaper.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.linear_gaussian import LinearGaussianBatch
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
                "vyb", "yb", "vpsib", "psib", "vybd", "ybd", "d1", "d2")
@@ -150,10 +150,10 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
                    theta_ref: np.ndarray | None = None):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
-    The ZOH is :class:`railpaper.sparse_zoh.AffineZOH` (prepared once per system): Taylor on the 45 nonzeros of
+    The ZOH is :class:`railpaper.engine.sparse_zoh.AffineZOH` (prepared once per system): Taylor on the 45 nonzeros of
     ``[A(θ) dt | B dt]`` formed straight from θ (≈ 5e-16 relative to
-    :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/test_kalman_bank.py and
-    tests/test_batch_expm.py check it).  The powers-of-two balancing (an exact similarity: it
+    :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/engine/test_kalman_bank.py and
+    tests/engine/test_batch_expm.py check it).  The powers-of-two balancing (an exact similarity: it
     changes only the rounding) is that of ``A(theta_ref)``, fixed when the system is made, so a
     matrix depends on its own θ only — not on the other particles, the order of calls or which
     filter called first; without ``theta_ref`` it is fixed at the first call, from that call's

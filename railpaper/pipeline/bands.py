@@ -7,7 +7,7 @@ batches share no seed.  The band of a metric is the observed [min, max] over the
 by ``widen`` × the range on each side (a point band when every batch agrees), and the widening
 never crosses a threshold of a claim rule that reads the metric: it stops halfway between the
 observed extreme and the threshold.  If the observed range itself straddles a threshold, the
-band says so in its ``source`` and ``tests/test_claims_bands.py`` will fail: the verdict is not
+band says so in its ``source`` and ``tests/pipeline/test_claims_bands.py`` will fail: the verdict is not
 stable at this sample size, which is a finding, not something to tune away.
 """
 

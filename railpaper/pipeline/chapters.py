@@ -15,10 +15,9 @@ from pathlib import Path
 
 from railpaper.experiments import CHAPTER_MODULES, available_chapters, load_chapter
 from railpaper.experiments.base import ChapterSpec, ParameterError
+from railpaper.paths import BOOK_DIR, NOTEBOOK_DIR
+from railpaper.pipeline.page import render_run_page
 
-REPO_DIR = Path(__file__).resolve().parents[2]
-BOOK_DIR = REPO_DIR / "book"
-NOTEBOOK_DIR = BOOK_DIR / "notebooks"
 KERNEL_NAME = "railpaper-venv"
 
 
@@ -229,7 +228,6 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
                 raise PipelineError(f"chapter '{name}' ran but wrote no metrics.json")
             hide_parameter_cells(staging / spec.notebook)
             if page:
-                from railpaper.pipeline.page import render_run_page
                 render_run_page(staging, spec.notebook, spec.title)
         except BaseException as exc:
             shutil.rmtree(staging, ignore_errors=True)

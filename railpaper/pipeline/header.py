@@ -11,7 +11,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from railpaper.pipeline.chapters import BOOK_DIR, chapter_spec
+from railpaper.pipeline.chapters import chapter_spec
+
+from railpaper.paths import BOOK_DIR
 
 #: The bibliography key of each chapter's paper in ``book/references.bib``.
 CHAPTER_REFERENCES = {

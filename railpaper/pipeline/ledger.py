@@ -22,9 +22,11 @@ from pathlib import Path
 from typing import Callable
 
 from railpaper.data import read_toml
+from railpaper.paths import DATA_DIR
 from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.claim_rules import (RULE_VERDICTS, check_row, is_untestable, rule_metrics,
                                             verdict_on_run)
+from railpaper.pipeline.outputs import claims
 
 VERDICTS = RULE_VERDICTS + ("missing",)
 #: HTML of each verdict in the tables: a coloured badge with an icon (book/_static/verdicts.css).
@@ -168,7 +170,6 @@ def _read_json(path: Path) -> dict | None:
 def run_rows(chapter: str, out_dir: str | Path, data_dir: str | Path | None = None
              ) -> tuple[list[LedgerRow], dict | None]:
     """Ledger rows of the run in ``out_dir`` and its ``metrics.json`` (None if not run)."""
-    from railpaper.data import DATA_DIR
     data = Path(data_dir) if data_dir else DATA_DIR
     out = Path(out_dir)
     run = _read_json(out / "metrics.json")
@@ -247,7 +248,6 @@ def chapter_rules(chapter: str) -> str:
     """How each of a chapter's verdicts is decided: the rule, fixed from the paper's wording,
     and why (a Markdown list: one item per claim, one sub-item per reading; a rule or a reason
     already given on the page is referred to, not repeated)."""
-    from railpaper.pipeline.outputs import claims
     lines = ["How each verdict is decided (the rule, fixed from the paper's wording, and why):", ""]
     groups: dict[str, list[tuple[str, dict]]] = {}
     for key, row in claims(chapter).items():

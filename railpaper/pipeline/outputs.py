@@ -12,7 +12,9 @@ from typing import Any
 
 import pandas as pd
 
-from railpaper.data import DATA_DIR, read_toml
+from railpaper.data import read_toml
+
+from railpaper.paths import DATA_DIR
 from railpaper.experiments.base import ChapterResult, ChapterSpec, check_metrics
 
 

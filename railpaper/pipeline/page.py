@@ -14,7 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from railpaper.pipeline.chapters import BOOK_DIR
+from railpaper.paths import BOOK_DIR
 
 PAGE_DIR = "page"
 

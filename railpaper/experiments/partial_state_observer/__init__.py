@@ -1,0 +1,11 @@
+"""Chapter ``partial-state-observer`` (paper 000, Zheng, Chai, Peng & Li 2016): 10-DOF vertical
+vehicle, LMI functional (partial-state) observer of the wheelset displacements.
+
+``SPEC`` (the chapter's parameters), ``validate(params)`` and ``run(quick=False, progress=None,
+**params)`` are what the pipeline needs; the modules of the package are the chapter's parts
+(``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
+"""
+
+from railpaper.experiments.partial_state_observer.experiment import SPEC, run, validate
+
+__all__ = ["SPEC", "run", "validate"]

@@ -1,0 +1,360 @@
+"""Chapter "quasi-gaussian-rbpf": the Q-GRBPF versus the RBPF, against the exact posterior.
+
+One record of the Q-GRBPF paper's toy (Eqs. 20–21, our reading) is filtered by
+
+* ``rbpf``            — the RBPF as Ding et al. (2014) describe it (resample + Liu–West every
+  step);
+* ``rbpf_working``    — the same engine, resampling when ESS < N/2 and moving only then;
+* ``qgrbpf``          — the Q-GRBPF with Eq. (10) read as an importance ratio (= 1);
+* ``qgrbpf_printed``  — the Q-GRBPF with Eq. (10) read literally (weights = Gaussian density),
+
+(and both Q-GRBPFs once more without their weight threshold, same random stream, for the
+threshold claim) and compared with the exact posterior of (a, b) on a grid (uniform prior on the paper-style box).
+Convergence is judged against the exact posterior: a filter "converges at step k" when from
+step k on its estimate stays within two posterior standard deviations of the posterior mean
+(−1: outside at the last step).  For comparison with the paper we also report the first step at
+which the estimate gets within ``tolerance_to_truth`` of the true value.  The same is repeated
+for ``n_monte_carlo`` records (replicate ``record`` is the main record, the others follow it); the
+records other than the main one are run by a caller-supplied function (the notebook runs them as a
+sweep on worker processes, each sample being this module's ``run`` for one record) or in this
+process.  The statistics the claim rules read are computed from the records by
+:mod:`~railpaper.experiments.quasi_gaussian_rbpf.evidence`; the computing times (curves over N and
+paired repeats at the paper's N) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf.computing_time`.
+``eq10_reading`` only selects which Q-GRBPF the illustrations show in full: the evidence of both
+readings is always computed.  :func:`run` returns a
+:class:`~railpaper.experiments.quasi_gaussian_rbpf.result.QuasiGaussianRBPFResult` (named fields).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from railpaper.engine.grid_posterior import grid_posterior
+from railpaper.engine.qgrbpf import QuasiGaussianRBPF
+from railpaper.engine.rbpf import RaoBlackwellisedPF, run_filter
+from railpaper.experiments.base import ChapterSpec, Parameter, ParameterError, no_progress
+from railpaper.experiments.base import check_banks
+from railpaper.experiments.quasi_gaussian_rbpf.evidence import (FILTERS, NO_THRESHOLD, PARAMS,
+                                                          QGRBPF_READINGS, descriptive_metrics,
+                                                          evidence_metrics)
+from railpaper.experiments.quasi_gaussian_rbpf.readings import run_readings
+from railpaper.experiments.quasi_gaussian_rbpf.result import (ComputingTime, OneRecord,
+                                                        QuasiGaussianRBPFResult)
+from railpaper.experiments.quasi_gaussian_rbpf.computing_time import timing
+from railpaper.models.linear_toys import paper004_system, simulate_paper004
+from railpaper.settling import first_step, settling_step
+from railpaper.threads import one_thread
+
+P = Parameter
+SPEC = ChapterSpec(
+    name="quasi-gaussian-rbpf",
+    title="Quasi-Gaussian RBPF versus RBPF for railway-vehicle parameters (authors lost in OCR)",
+    paper="004_e1cb56090c839832.txt",
+    notebook="quasi_gaussian_rbpf.ipynb",
+    quick_sizes="500 particles, 200 steps, 61x61 grid, 50 Monte Carlo records, timing up to N=1000, "
+                "8 paired timing repeats",
+    notebook_requires={"timing": True},
+    parameters=[
+        P("a_true", -0.7, "float", "true parameter a of Eq. (20), 1"),
+        P("b_true", 1.5, "float", "true parameter b of Eq. (20), 1"),
+        P("q_var", 0.001, "float", "variance of each process-noise component w, 1", positive=True),
+        P("r_var", 0.001, "float", "variance of each measurement-noise component e, 1",
+          positive=True),
+        P("p0_std", 0.05, "float", "initial state standard deviation (P0 = p0_std^2 I), 1",
+          positive=True),
+        P("n_particles", 1000, "int", "particles of every filter", quick=500, minimum=2),
+        P("n_steps", 300, "int", "measurements per record", quick=200, minimum=2),
+        P("a_min", -1.0, "float", "lower bound of the uniform prior on a, 1"),
+        P("a_max", 0.4, "float", "upper bound of the uniform prior on a, 1"),
+        P("b_min", 1.0, "float", "lower bound of the uniform prior on b, 1"),
+        P("b_max", 2.8, "float", "upper bound of the uniform prior on b, 1"),
+        P("liu_west_delta", 0.98, "float", "Liu-West discount factor delta of the RBPF move, 1",
+          positive=True),
+        P("ess_fraction", 0.5, "float", "working RBPF resamples when ESS < ess_fraction N, 1",
+          positive=True),
+        P("tempering_steps", 0, "int", "working RBPF likelihood tempering steps (0 = off)",
+          minimum=0),
+        P("weight_threshold", 0.01, "float",
+          "Q-GRBPF drops likelihood weights below weight_threshold/N, 1", minimum=0.0),
+        P("eq10_reading", "ratio", "str", "reading of Eq. (10) the illustrations show in full: "
+          "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
+        P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
+          quick=61, minimum=3),
+        P("n_monte_carlo", 100, "int", "records (seeds) of the Monte Carlo study", quick=50,
+          minimum=1),
+        P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
+          "Monte Carlo records are record+1, record+2 and so on", minimum=0),
+        P("timing", True, "bool", "measure computing times (false: a Monte Carlo sample of a "
+          "sweep, which needs only the record's metrics)"),
+        P("timing_particles", [100, 300, 1000, 3000, 10000], "list[int]",
+          "particle counts of the computing-time comparison", quick=[100, 300, 1000],
+          positive=True),
+        P("timing_steps", 100, "int", "steps timed per filter and particle count", quick=50,
+          minimum=1),
+        P("timing_repeats", 3, "int", "repeats per timing of the curves (the fastest is kept)",
+          quick=3, minimum=1),
+        P("timing_ratio_particles", 1000, "int", "particles of the paired timing repeats (the "
+          "paper's N)", minimum=2),
+        P("timing_ratio_repeats", 20, "int", "paired timing repeats (RBPF and both Q-GRBPFs back "
+          "to back) behind the time-ratio evidence", quick=8, minimum=1),
+        P("tolerance_to_truth", 0.05, "float",
+          "paper-like convergence: first step with |estimate - truth| below this, 1",
+          positive=True),
+        P("short_horizon", 60, "int", "shortest horizon the paper's lost figures can have had "
+          "(its RBPF converges at step 55, read to ±5): errors are also taken at this step "
+          "(the last one if the record is shorter)",
+          minimum=1),
+        P("readings_records", 100, "int", "records per reading of the readings study (the "
+          "exact posterior under five readings of the printed Q, R and P0, each read at five "
+          "figure horizons; 0 skips it)", quick=40, minimum=0),
+        P("seed", 0, "int", "seed of records, initial particles and filters", minimum=0),
+    ],
+)
+
+EQ10_READINGS = ("ratio", "printed")
+
+
+def validate(p: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
+    if not p["a_min"] < p["a_true"] < p["a_max"]:
+        raise ParameterError(f"a_true={p['a_true']} must lie inside the prior box "
+                             f"({p['a_min']}, {p['a_max']})")
+    if not p["b_min"] < p["b_true"] < p["b_max"]:
+        raise ParameterError(f"b_true={p['b_true']} must lie inside the prior box "
+                             f"({p['b_min']}, {p['b_max']})")
+    if not 1.0 / 3.0 < p["liu_west_delta"] <= 1.0:
+        raise ParameterError(f"liu_west_delta must be in (1/3, 1], got {p['liu_west_delta']}")
+    if not p["ess_fraction"] <= 1.0:
+        raise ParameterError(f"ess_fraction must be in (0, 1], got {p['ess_fraction']}")
+    if not p["weight_threshold"] < 1.0:
+        raise ParameterError(f"weight_threshold must be < 1 (a fraction of 1/N), "
+                             f"got {p['weight_threshold']}")
+    if p["eq10_reading"] not in EQ10_READINGS:
+        raise ParameterError(f"eq10_reading must be one of {', '.join(EQ10_READINGS)}, "
+                             f"got {p['eq10_reading']!r}")
+    if max(p["timing_particles"]) < 2:
+        raise ParameterError("timing_particles needs at least one count >= 2")
+    check_banks([("n_particles", p["n_particles"], p["n_particles"], 2, 6, "the RBPF and Q-GRBPFs"),
+                 ("timing_particles", p["timing_particles"],
+                  max(p["timing_particles"]) * p["timing"], 2, 6, "the timed filters"),
+                 ("timing_ratio_particles", p["timing_ratio_particles"],
+                  p["timing_ratio_particles"] * p["timing"], 2, 6, "the timed filters"),
+                 ("grid_size", p["grid_size"], p["grid_size"] ** 2, 2, 6 + p["n_steps"],
+                  "the exact posterior's grid of Kalman filters")])
+
+
+def prior_box(p: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corners ``(a_min, b_min)``, ``(a_max, b_max)`` of the uniform prior (1)."""
+    return np.array([p["a_min"], p["b_min"]]), np.array([p["a_max"], p["b_max"]])
+
+
+def initial_state(p: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Initial mean ``x0 = 0`` and covariance ``P0 = p0_std² I`` of every particle's Kalman
+    filter (and of the exact posterior's)."""
+    return np.zeros(2), p["p0_std"] ** 2 * np.eye(2)
+
+
+def prior_particles(p: dict, rng: np.random.Generator) -> np.ndarray:
+    """``n_particles`` initial parameter particles (N, 2), uniform on :func:`prior_box`."""
+    lower, upper = prior_box(p)
+    return lower + (upper - lower) * rng.random((p["n_particles"], 2))
+
+
+def make_filter(name: str, p: dict, system, theta0, rng):
+    """Filter ``name`` (one of FILTERS, or a Q-GRBPF name + NO_THRESHOLD)."""
+    x0, P0 = initial_state(p)
+    if name == "rbpf":
+        return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="paper",
+                                  delta=p["liu_west_delta"])
+    if name == "rbpf_working":
+        return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="working",
+                                  delta=p["liu_west_delta"], ess_fraction=p["ess_fraction"],
+                                  tempering_steps=p["tempering_steps"])
+    base = name.removesuffix(NO_THRESHOLD)
+    weighting = "printed" if base == "qgrbpf_printed" else "ratio"
+    threshold = 0.0 if name.endswith(NO_THRESHOLD) else p["weight_threshold"]
+    return QuasiGaussianRBPF(system, theta0, x0, P0, rng, weighting=weighting,
+                             weight_threshold=threshold)
+
+
+def streams(seed: int, replicate: int) -> dict[str, np.random.Generator]:
+    """Independent generators per use (``data``, ``prior`` and one per filter), fixed by
+    (seed, replicate)."""
+    names = ("data", "prior") + FILTERS
+    children = np.random.SeedSequence([seed, replicate]).spawn(len(names))
+    return {n: np.random.default_rng(c) for n, c in zip(names, children)}
+
+
+def replicate(p: dict, index: int) -> OneRecord:
+    """Simulate record ``index``, run the four filters, the two Q-GRBPFs without threshold (on
+    the same random streams as with it) and the exact posterior on it."""
+    gen = streams(p["seed"], index)
+    system = paper004_system(p["q_var"], p["r_var"])
+    sim = simulate_paper004(p["a_true"], p["b_true"], p["q_var"], p["r_var"], p["p0_std"],
+                            p["n_steps"], gen["data"])
+    lower, upper = prior_box(p)
+    theta0 = prior_particles(p, gen["prior"])
+    exact = grid_posterior(system, sim.y, lower, upper, p["grid_size"], *initial_state(p))
+    runs = {name: run_filter(make_filter(name, p, system, theta0, gen[name]), sim.y)
+            for name in FILTERS}
+    off = {q + NO_THRESHOLD: run_filter(make_filter(q + NO_THRESHOLD, p, system, theta0,
+                                                    streams(p["seed"], index)[q]), sim.y)
+           for q in QGRBPF_READINGS}
+    return OneRecord(index=index, states=sim.x, measurements=sim.y, exact=exact, runs=runs,
+                     runs_without_threshold=off)
+
+
+def record_metrics(p: dict, rep: OneRecord) -> dict:
+    """Per-record metrics (all filters, both parameters; final error and z of the Q-GRBPFs
+    without threshold)."""
+    exact, truth = rep.exact, (p["a_true"], p["b_true"])
+    tol = p["tolerance_to_truth"]
+    short = min(p["short_horizon"], p["n_steps"]) - 1  # index of that step (or the last)
+    m = {}
+    for j, par in enumerate(PARAMS):
+        mean, std = exact.mean[:, j], exact.std[:, j]
+        m[f"final_error_{par}_posterior"] = mean[-1] - truth[j]
+        m[f"short_error_{par}_posterior"] = mean[short] - truth[j]
+        m[f"final_std_{par}_posterior"] = std[-1]
+        m[f"first_within_{par}_posterior"] = first_step(np.abs(mean - truth[j]) <= tol)
+        m[f"settling_step_{par}_posterior"] = settling_step(np.abs(mean - mean[-1]) <= tol)
+        below = np.flatnonzero(std <= p["tolerance_to_truth"])
+        m[f"posterior_std_below_tolerance_step_{par}"] = int(below[0]) + 1 if below.size else -1
+        for name, run in rep.runs.items():
+            est = run.theta_mean[:, j]
+            m[f"convergence_step_{par}_{name}"] = settling_step(np.abs(est - mean) <= 2.0 * std)
+            m[f"first_within_{par}_{name}"] = first_step(np.abs(est - truth[j]) <= tol)
+            m[f"settling_step_{par}_{name}"] = settling_step(np.abs(est - est[-1]) <= tol)
+            m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
+            m[f"short_error_{par}_{name}"] = est[short] - truth[j]
+            m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
+            m[f"final_std_ratio_{par}_{name}"] = run.theta_std[-1, j] / std[-1]
+        for name, run in rep.runs_without_threshold.items():
+            est = run.theta_mean[:, j]
+            m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
+            m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
+    return m
+
+
+def _timeseries(p: dict, rep: OneRecord) -> pd.DataFrame:
+    exact, runs = rep.exact, rep.runs
+    cols = {"step": rep.steps, "y1": rep.measurements[:, 0], "y2": rep.measurements[:, 1]}
+    for name in ("rbpf", "qgrbpf"):
+        cols[f"a_est_{name}"], cols[f"b_est_{name}"] = runs[name].theta_mean.T
+    cols["a_post_mean"], cols["b_post_mean"] = exact.mean.T
+    cols["a_post_std"], cols["b_post_std"] = exact.std.T
+    for name in ("rbpf_working", "qgrbpf_printed"):
+        cols[f"a_est_{name}"], cols[f"b_est_{name}"] = runs[name].theta_mean.T
+    for name in FILTERS:
+        cols[f"a_std_{name}"], cols[f"b_std_{name}"] = runs[name].theta_std.T
+        cols[f"ess_{name}"] = runs[name].ess
+    cols["x1_true"], cols["x2_true"] = rep.states[1:].T
+    for name in FILTERS:
+        cols[f"x1_est_{name}"], cols[f"x2_est_{name}"] = runs[name].x_mean.T
+    return pd.DataFrame(cols)
+
+
+def _timing(p: dict, y: np.ndarray, progress):
+    """Computing times on the main record (:func:`quasi_gaussian_rbpf_timing.timing`)."""
+    system = paper004_system(p["q_var"], p["r_var"])
+
+    def fresh_filter(name: str, n: int, repeat: int):
+        gen = streams(p["seed"], repeat)
+        return make_filter(name, p, system, prior_particles(dict(p, n_particles=n), gen["prior"]),
+                           gen[name])
+
+    return timing(p, fresh_filter, FILTERS, y, progress)
+
+
+def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.DataFrame:
+    """Per-record metrics (column ``replicate`` = record index) of ``records``, one by one."""
+    rows = []
+    for i, index in enumerate(records):
+        progress(0.9 * (i + 1) / (len(records) + 1), f"Monte Carlo record {i + 1}/{len(records)}")
+        rows.append(dict(replicate=index, **record_metrics(p, replicate(p, index))))
+    return pd.DataFrame(rows)
+
+
+def run(*, quick: bool = False, progress=None, monte_carlo=None,
+        **params) -> QuasiGaussianRBPFResult:
+    """Run the chapter: main record, Monte Carlo over records, computing times.
+
+    Parameters
+    ----------
+    quick : bool
+        The chapter's quick sizes for parameters not given.
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    monte_carlo : callable, optional
+        ``monte_carlo(p, records, progress)`` → DataFrame with a ``replicate`` column (the record
+        index) and the per-record metrics of ``records`` (all but the main record), e.g. a sweep
+        of this function with ``n_monte_carlo = 1``, ``timing = False`` and ``record`` as the grid.
+        Default: :func:`records_in_process`.
+    **params
+        Chapter parameters (:data:`SPEC`).
+
+    Returns
+    -------
+    QuasiGaussianRBPFResult
+        Metrics, timings, the main record's time series and the Monte Carlo table for the
+        pipeline; the main record (:class:`OneRecord`), the Monte Carlo table and the computing
+        times (:class:`ComputingTime`) as named fields.
+
+    Notes
+    -----
+    Runs on one numba and one OpenBLAS thread (:func:`railpaper.threads.one_thread`); the Monte
+    Carlo records run on sweep workers, one thread each, anyway.
+    """
+    progress = progress or no_progress
+    p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
+    validate(p)
+    with one_thread():
+        return _run(p, progress, monte_carlo)
+
+
+def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
+    """:func:`run` on resolved, validated parameters, on one numba thread."""
+    start = time.perf_counter()
+    main = replicate(p, p["record"])
+    first = dict(replicate=p["record"], **record_metrics(p, main))
+    records = list(range(p["record"] + 1, p["record"] + p["n_monte_carlo"]))
+    mc_table = pd.DataFrame([first])
+    if records:
+        others = (monte_carlo or records_in_process)(p, records, progress)
+        missing = sorted(set(first) - set(others.columns))
+        if missing or sorted(others["replicate"]) != records:
+            raise ValueError(f"Monte Carlo records incomplete: expected records {records[0]}-"
+                             f"{records[-1]}{', columns ' + ', '.join(missing[:3]) if missing else ''}")
+        others = others.sort_values("replicate", kind="stable")[list(first)]
+        mc_table = pd.concat([mc_table, others], ignore_index=True)
+    mc_seconds = time.perf_counter() - start
+    metrics = {k: v for k, v in first.items() if k != "replicate"}
+    metrics.update(descriptive_metrics(mc_table, p["n_steps"]))
+    metrics.update(evidence_metrics(mc_table, {"a": p["a_true"], "b": p["b_true"]}))
+    metrics["grid_min_std_over_spacing"] = main.exact.min_std_over_spacing
+    metrics["grid_edge_mass"] = main.exact.edge_mass
+    timings, timing_table, timing_samples = (_timing(p, main.measurements, progress)
+                                             if p["timing"] else ({}, None, None))
+    timings["monte_carlo_seconds"] = mc_seconds
+    readings = None
+    if p["readings_records"] > 0:
+        start = time.perf_counter()
+        readings = run_readings(truth=(p["a_true"], p["b_true"]), lower=(p["a_min"], p["b_min"]),
+                                upper=(p["a_max"], p["b_max"]), n_records=p["readings_records"],
+                                grid_size=p["grid_size"], tolerance=p["tolerance_to_truth"],
+                                seed=p["seed"], progress=lambda m: progress(0.97, m))
+        metrics.update(readings.metrics())
+        timings["readings_seconds"] = time.perf_counter() - start
+    progress(1.0, "done")
+    return QuasiGaussianRBPFResult(
+        metrics=metrics, timings=timings, timeseries=_timeseries(p, main),
+        extra_tables=dict({"monte_carlo": mc_table},
+                          **({} if readings is None else {"readings": readings.table}),
+                          **({} if timing_samples is None else {"timing_samples": timing_samples})),
+        main=main, monte_carlo=mc_table,
+        computing_time=(None if timing_table is None
+                        else ComputingTime(timing_table, timing_samples)),
+        readings=readings)

@@ -1,0 +1,203 @@
+"""Figures of chapter ``quasi-gaussian-rbpf`` (7 in wide, legends outside the data, display names).
+
+Each function takes the run's
+:class:`~railpaper.experiments.quasi_gaussian_rbpf.result.QuasiGaussianRBPFResult` and resolved
+parameters and returns a matplotlib figure; the notebook saves it and shows it as a numbered MyST
+figure.  The parameters ``a``, ``b`` and their errors are dimensionless.
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.ticker import FuncFormatter, NullFormatter
+
+from railpaper.experiments.display import legend_below
+from railpaper.experiments.quasi_gaussian_rbpf.evidence import PARAMS
+
+WIDTH_IN = 7.0
+#: Display names of the filters (and of the exact posterior).
+NAMES = {"posterior": "exact posterior", "rbpf": "RBPF, paper's scheme",
+         "rbpf_working": "RBPF, working scheme", "qgrbpf": "Q-GRBPF, Eq. (10) as a ratio",
+         "qgrbpf_printed": "Q-GRBPF, Eq. (10) as printed"}
+#: Colour and line style of each filter.
+STYLES = {"rbpf": ("C0", "-"), "rbpf_working": ("C2", "-."), "qgrbpf": ("C3", "-"),
+          "qgrbpf_printed": ("C1", "--")}
+#: The paper's convergence steps and final errors (Section IV, discussion of Figs 1–4).
+PAPER_STEPS = {"a": {"qgrbpf": 4, "rbpf": 55}, "b": {"qgrbpf": 4, "rbpf": 53}}
+PAPER_ERRORS = {"a": {"qgrbpf": 0.066, "rbpf": 0.167}, "b": {"qgrbpf": -0.055, "rbpf": -0.067}}
+#: Steps shown in the close-up of the first steps (holds the paper's steps 4 and 53-55).
+WINDOW_STEPS = 80
+#: Colour of the paper's values (convergence steps, final errors are in the filters' colours).
+PAPER_COLOR = "C4"
+
+
+def line_widths(params) -> dict[str, float]:
+    """Line width per filter: the Q-GRBPF of the other reading of Eq. (10) than
+    ``eq10_reading`` is drawn thin."""
+    thin = "qgrbpf_printed" if params["eq10_reading"] == "ratio" else "qgrbpf"
+    return {name: 0.8 if name == thin else 1.3 for name in STYLES}
+
+
+def _paper_steps(ax, par: str) -> None:
+    labels = {"qgrbpf": "paper: Q-GRBPF converges (step 4)",
+              "rbpf": "paper: RBPF converges (step 55 for a, 53 for b)"}
+    for name, ls in (("qgrbpf", "-"), ("rbpf", "--")):
+        ax.axvline(PAPER_STEPS[par][name], color=PAPER_COLOR, ls=ls, lw=1.0, label=labels[name])
+
+
+def estimates(result, params):
+    """Estimates of a and b on the main record with the exact posterior (paper Figs 1–2): the
+    first :data:`WINDOW_STEPS` steps (left) and the whole record (right)."""
+    rec, widths = result.main, line_widths(params)
+    steps = rec.steps
+    fig, axes = plt.subplots(2, 2, figsize=(WIDTH_IN, 6.6), sharey="row",
+                             gridspec_kw={"width_ratios": [1, 1.35]})
+    for row, j, par in zip(axes, range(2), PARAMS):
+        mean, std = rec.exact.mean[:, j], rec.exact.std[:, j]
+        for ax, stop in zip(row, (min(WINDOW_STEPS, len(steps)), len(steps))):
+            k = slice(0, stop)
+            ax.fill_between(steps[k], (mean - 2 * std)[k], (mean + 2 * std)[k], color="0.82",
+                            label="exact posterior mean ± 2 std")
+            ax.plot(steps[k], mean[k], color="k", lw=1.2, label="exact posterior mean")
+            for name, (color, ls) in STYLES.items():
+                ax.plot(steps[k], rec.runs[name].theta_mean[k, j], color=color, ls=ls,
+                        lw=widths[name], label=NAMES[name])
+            ax.axhline(params[f"{par}_true"], color="k", ls=":", lw=1, label="true value")
+        _paper_steps(row[0], par)
+        row[0].set(ylabel=f"estimate of {par} (1)",
+                   title=f"{par}: first {min(WINDOW_STEPS, len(steps))} steps")
+        row[1].set_title(f"{par}: whole record (paper Fig. {1 + j})")
+    for ax in axes[1]:
+        ax.set_xlabel("step k")
+    fig.tight_layout(rect=(0, 0.17, 1, 1))
+    legend_below(fig, axes[0, 0])
+    return fig
+
+
+def errors(result, params):
+    """Estimation errors on the main record (paper Figs 3–4), symlog, with the exact
+    posterior's ±2 std band and the paper's final errors over the horizons they can be from."""
+    rec, widths = result.main, line_widths(params)
+    steps, short = rec.steps, min(params["short_horizon"], len(rec.steps))
+    fig, axes = plt.subplots(2, 1, figsize=(WIDTH_IN, 6.4), sharex=True)
+    for ax, j, par in zip(axes, range(2), PARAMS):
+        truth = params[f"{par}_true"]
+        err, std = rec.exact.mean[:, j] - truth, rec.exact.std[:, j]
+        ax.fill_between(steps, err - 2 * std, err + 2 * std, color="0.82",
+                        label="exact posterior mean ± 2 std")
+        for name, (color, ls) in STYLES.items():
+            ax.plot(steps, rec.runs[name].theta_mean[:, j] - truth, color=color, ls=ls,
+                    lw=widths[name], label=NAMES[name])
+        for name, mark in (("qgrbpf", "Q-GRBPF"), ("rbpf", "RBPF")):
+            ax.hlines(PAPER_ERRORS[par][name], short, steps[-1], color=STYLES[name][0], lw=2.2,
+                      alpha=0.45, label=f"paper's final error, {mark} (from step {short} on)")
+        ax.axvline(short, color=PAPER_COLOR, ls="--", lw=1.0,
+                   label=f"step {short}: shortest horizon of the paper's figures")
+        ax.axhline(0, color="k", lw=0.8)
+        ax.set_yscale("symlog", linthresh=0.05)
+        low, high = ax.get_ylim()
+        ticks = [t for t in (-1, -0.3, -0.1, 0, 0.1, 0.3, 1) if low <= t <= high]
+        ax.set_yticks(ticks, [f"{t:g}".replace("-", "−") for t in ticks])
+        ax.yaxis.set_minor_formatter(NullFormatter())
+        ax.set(ylabel=f"error of {par} (1)", title=f"{par} (paper Fig. {3 + j})")
+    axes[1].set_xlabel("step k")
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
+    legend_below(fig, axes[0])
+    return fig
+
+
+def spread_ratio(result, params):
+    """Each filter's parameter std over the exact posterior's, main record: every filter on a
+    log scale (left) and a linear close-up around 1 (right)."""
+    rec, widths = result.main, line_widths(params)
+    fig, axes = plt.subplots(2, 2, figsize=(WIDTH_IN, 5.6), sharex=True)
+    for row, j, par in zip(axes, range(2), PARAMS):
+        for name, (color, ls) in STYLES.items():
+            ratio = rec.runs[name].theta_std[:, j] / rec.exact.std[:, j]
+            for ax in row:
+                ax.plot(rec.steps, ratio, color=color, ls=ls, lw=widths[name], label=NAMES[name])
+        for ax in row:
+            ax.axhline(1, color="k", lw=0.8, label="calibrated (ratio 1)")
+        row[0].set(yscale="log", ylabel=f"std of {par}: filter /\nexact posterior")
+        row[1].set_ylim(bottom=0)
+    axes[0, 0].set_title("every filter (log scale)")
+    axes[0, 1].set_title("close-up around 1 (linear)")
+    for ax in axes[1]:
+        ax.set_xlabel("step k")
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
+    legend_below(fig, axes[0, 0])
+    return fig
+
+
+def monte_carlo_errors(result, params):
+    """Over the Monte Carlo records: final errors (left) and final distances from the exact
+    posterior mean in posterior std (right, log), horizontal boxes per filter."""
+    mc = result.monte_carlo
+    names = ["posterior"] + list(STYLES)
+    fig, axes = plt.subplots(2, 2, figsize=(WIDTH_IN, 5.8), sharey=True)
+    for row, par in zip(axes, PARAMS):
+        row[0].boxplot([mc[f"final_error_{par}_{n}"] for n in names][::-1], vert=False,
+                       widths=0.6)
+        row[0].axvline(0, color="k", lw=0.8)
+        row[0].set(xlabel=f"final error of {par} (1)")
+        z = [np.abs(mc[f"final_z_{par}_{n}"]) for n in names[1:]][::-1]
+        row[1].boxplot(z, positions=range(1, len(names)), vert=False, widths=0.6)
+        row[1].axvline(2, color="k", ls=":", lw=1)
+        row[1].set(xscale="log", xlabel=f"|final {par} − posterior mean| / posterior std")
+    for ax in axes[:, 0]:
+        ax.set_yticks(range(1, len(names) + 1), [NAMES[n] for n in names][::-1])
+    fig.tight_layout()
+    return fig
+
+
+def settling(result, params):
+    """Distribution over records of the settling step of every filter and of the exact
+    posterior mean (log axis), with the paper's steps."""
+    mc, tol = result.monte_carlo, params["tolerance_to_truth"]
+    fig, axes = plt.subplots(2, 1, figsize=(WIDTH_IN, 5.8), sharex=True)
+    for ax, par in zip(axes, PARAMS):
+        for name in ["posterior"] + list(STYLES):
+            color, ls = STYLES.get(name, ("k", ":"))
+            steps = np.sort(mc[f"settling_step_{par}_{name}"])
+            ax.step(steps, np.arange(1, len(steps) + 1) / len(steps), where="post", color=color,
+                    ls=ls, lw=1.5 if name == "posterior" else 1.2,
+                    label="exact posterior mean" if name == "posterior" else NAMES[name])
+        _paper_steps(ax, par)
+        ax.set(xscale="log", ylabel="fraction of records", ylim=(0, 1.03), title=par)
+    axes[1].xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axes[1].set_xlabel(f"settling step (the estimate stays within ±{tol:g} of its final value)")
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
+    legend_below(fig, axes[0])
+    return fig
+
+
+def computing_time(result, params):
+    """Seconds per step against N (left) and the paired ratios at the paper's N (right)."""
+    curves, pairs = result.computing_time.curves_s_per_step, result.computing_time.paired_s_per_step
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(WIDTH_IN, 3.9),
+                                 gridspec_kw={"width_ratios": [1.1, 1]})
+    for name, (color, ls) in STYLES.items():
+        d = curves[curves["filter"] == name]
+        ax.loglog(d.n_particles, d.seconds_per_step * 1e3, marker="o", ms=4, color=color, ls=ls,
+                  label=NAMES[name])
+    counts = sorted(curves.n_particles.unique())
+    ax.set_xticks(counts, [str(n) for n in counts])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    ax.set(xlabel="particles N", ylabel="computing time per step (ms)")
+    ratios = {"Q-GRBPF,\nratio": pairs.qgrbpf / pairs.rbpf,
+              "Q-GRBPF,\nprinted": pairs.qgrbpf_printed / pairs.rbpf,
+              "one re-\nsampling": pairs.resampling / pairs.rbpf}
+    bx.boxplot(list(ratios.values()), widths=0.6)
+    bx.set_xticks(range(1, 4), list(ratios))
+    bx.axhline(0.44, color=PAPER_COLOR, ls="--", lw=1, label="paper: 56 % less (ratio 0.44)")
+    bx.set(ylabel="time / time of one RBPF step", ylim=(0, None),
+           title=f"{len(pairs)} paired repeats, N = {params['timing_ratio_particles']}")
+    handles = ax.get_legend_handles_labels()
+    extra = bx.get_legend_handles_labels()
+    fig.tight_layout(rect=(0, 0.17, 1, 1))
+    fig.legend(handles[0] + extra[0], handles[1] + extra[1], loc="lower center", ncol=2,
+               frameon=False)
+    return fig

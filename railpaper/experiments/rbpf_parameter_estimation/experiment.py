@@ -1,0 +1,123 @@
+"""Chapter "rbpf-parameter-estimation": Ding et al. (2014)'s RBPF versus an augmented-state EKF.
+
+Part 1 — Eq. (18) toy (:mod:`railpaper.experiments.rbpf_parameter_estimation.toy`): the RBPF
+exactly as the paper's Steps 1–2.6, our working scheme, and an augmented-state EKF from the
+paper's two initial conditions, on ``toy_seeds`` records (seeds ``seed``, ``seed + 1``, …).
+
+Part 2 — the lateral vehicle (Eqs. 1–9, :mod:`railpaper.models.lateral_16state`): ``n_records``
+records (seeds ``seed``, ``seed + 1``, …), each simulated at ``dt_s / truth_substeps`` from an
+alignment profile of ``spectrum`` and sampled at ``dt_s`` with stated sensor noise; on each, the
+RBPF over θ = (Csy, λ, Kpy, Ksy, Csaly) with the paper's literal scheme and with our working
+scheme (tempering, ESS-triggered resampling, Liu–West move only after resampling, on normalised
+log-parameters: our modification, not the paper's method), and the augmented 21-state EKF from
+one initial guess (``ekf_guesses`` on the first record, as the paper's 10); the Kalman-likelihood
+CRLB on the first record (:mod:`railpaper.experiments.rbpf_parameter_estimation.lateral`).  The Monte Carlo evidence of the claims (rates, medians, biases with
+95 % intervals) is computed by :mod:`railpaper.experiments.rbpf_parameter_estimation.evidence`.
+``measurements_csv`` runs both RBPF schemes on a user's file (no evidence: it needs the truth).
+``lateral=False`` skips Part 2 (sweep samples of the toy alone).
+
+:func:`run` returns a :class:`~railpaper.experiments.rbpf_parameter_estimation.result.
+RbpfParameterEstimationResult`: the metrics, timings and time series the pipeline writes, and
+the two parts' named results (``result.toy``, ``result.lateral``).  One record by hand:
+:mod:`~railpaper.experiments.rbpf_parameter_estimation.lateral` (the toy's:
+:mod:`~railpaper.experiments.rbpf_parameter_estimation.toy`).
+"""
+
+from __future__ import annotations
+
+import time
+
+from railpaper import track
+from railpaper.experiments.base import ParameterError, check_banks, check_sample_time, no_progress
+from railpaper.experiments.rbpf_parameter_estimation import evidence, lateral, posterior
+from railpaper.experiments.rbpf_parameter_estimation.measurements import read_measurements
+from railpaper.experiments.rbpf_parameter_estimation.model_error import run_model_error
+from railpaper.experiments.rbpf_parameter_estimation.result import RbpfParameterEstimationResult
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy
+from railpaper.models import lateral_16state as L
+from railpaper.threads import one_thread
+
+__all__ = ["SPEC", "run", "validate"]
+
+
+def validate(p: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
+    if not p["prior_low"] < 1.0 < p["prior_high"]:
+        raise ParameterError("prior_low < 1 < prior_high is needed (the box must hold the truth)")
+    if not 1 / 3 < p["paper_delta"] <= 1 or not 1 / 3 < p["working_delta"] <= 1:
+        raise ParameterError("Liu-West delta must be in (1/3, 1]")
+    if p["wavelength_min_m"] < 2 * p["speed_kmh"] / 3.6 * p["dt_s"]:
+        raise ParameterError("wavelength_min_m is shorter than the filter's Nyquist wavelength "
+                             "2 V dt_s")
+    if p["spectrum"] not in track.SPECTRA:
+        raise ParameterError(f"parameter 'spectrum': unknown spectrum {p['spectrum']!r}; "
+                             f"one of {', '.join(track.SPECTRA)}")
+    for name in ("toy_seeds", "n_records"):
+        if p[name] >= 1000:
+            raise ParameterError(f"parameter '{name}' must be < 1000 (seed batches 1000 apart are "
+                                 f"disjoint), got {p[name]}")
+    if p["ess_fraction"] > 1:
+        raise ParameterError("ess_fraction must be <= 1")
+    fixed, theta = lateral.vehicle()
+    check_sample_time("dt_s", p["dt_s"], L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6),
+                      f"the lateral model at {p['speed_kmh']:g} km/h")
+    check_banks([("toy_particles", p["toy_particles"], p["toy_particles"], 2, 10, "the toy RBPF"),
+                 ("n_particles", p["n_particles"], p["n_particles"] * p["lateral"], L.N_STATES,
+                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF, F, H, G per particle"),
+                 ("ibis_particles", p["ibis_particles"], 2 * p["ibis_particles"] * p["lateral"],
+                  L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
+                  "the lateral IBIS sampler, particles and their proposals"),
+                 ("toy_ibis_particles", p["toy_ibis_particles"], 2 * p["toy_ibis_particles"], 2,
+                  10, "the toy IBIS sampler, particles and their proposals")])
+    if p["measurements_csv"]:
+        read_measurements(p["measurements_csv"], p)
+
+
+def run(*, quick: bool = False, progress=None, **p) -> RbpfParameterEstimationResult:
+    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`), on one numba and one
+    OpenBLAS thread (:func:`railpaper.threads.one_thread`)."""
+    progress = progress or no_progress
+    validate(p)
+    with one_thread():
+        return _run(p, progress)
+
+
+def _run(p: dict, progress) -> RbpfParameterEstimationResult:
+    metrics, timings = {}, {}
+    progress(0.02, "toy")
+    t0 = time.perf_counter()
+    toy = run_toy(p)
+    timings["toy_s"] = time.perf_counter() - t0
+    st = toy.records
+    for ic in (1, 2):                                           # the illustrated record
+        main = st[(st.seed == p["seed"]) & (st.init == ic)].iloc[0]
+        metrics[f"toy_ekf_diverged_init{ic}"] = bool(main.ekf_diverged)
+        metrics[f"toy_ekf_final_abs_error_max_init{ic}"] = float(main.ekf_err_max)
+        metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
+        metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] = float(
+            main.rbpf_working_err_max)
+    metrics.update(evidence.toy_metrics(st))
+    t0 = time.perf_counter()
+    toy = posterior.toy_posteriors(p, toy)                      # the exact posterior, toy
+    timings["ibis_toy_s"] = time.perf_counter() - t0
+    metrics.update(posterior.toy_metrics(toy))
+    part, ts, mismatch = None, None, None
+    if p["lateral"]:
+        part, more, spent = lateral.run_lateral(p, progress)
+        metrics.update(more)
+        timings.update(spent)
+        ts = lateral.lateral_timeseries(part)
+    if p["lateral"] and not p["measurements_csv"]:
+        progress(0.9, "model error")
+        t0 = time.perf_counter()
+        mismatch, more = run_model_error(p, part)
+        metrics.update(more)
+        timings["mismatch_s"] = time.perf_counter() - t0
+    progress(1.0, "done")
+    return RbpfParameterEstimationResult(
+        metrics=metrics, timings=timings, timeseries=ts,
+        extra_tables={"toy_timeseries": toy.table(),
+                      "toy_record": posterior.toy_record_table(toy.record)},
+        extra_files={"toy_posterior.json": posterior.toy_posterior_json(p, toy.posterior)},
+        toy=toy, lateral=part, mismatch=mismatch)

@@ -1,0 +1,323 @@
+"""The lateral-vehicle study of chapter ``rbpf-parameter-estimation`` (paper 003, Part 2).
+
+``n_records`` records of the 16-state lateral vehicle (Eqs. 1–9,
+:mod:`railpaper.models.lateral_16state`), seeds ``seed``, ``seed + 1``, …, each simulated at
+``dt_s / truth_substeps`` from an alignment profile of ``spectrum`` and sampled at ``dt_s`` with
+stated sensor noise; on each, the RBPF over θ = (Csy, λ, Kpy, Ksy, Csaly) with the paper's literal
+scheme and with our working scheme (tempering, ESS-triggered resampling, Liu–West move only after
+resampling, on normalised log-parameters: our modification, not the paper's method), the
+augmented 21-state EKF from one initial guess (``ekf_guesses`` on the first record, as the
+paper's 10), the exact posterior (IBIS) on the first ``ibis_records`` and the Kalman-likelihood
+CRLB on the first record.  One record by hand: :func:`simulate_lateral`, :func:`filter_system`,
+:func:`lateral_rbpf`, :func:`lateral_ekf`.  :func:`run_lateral` returns the part, its own
+metrics and its timings; the metrics of a stack of runs are :func:`lateral_metrics`.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from railpaper import track
+from railpaper.data import load_quantities
+from railpaper.discretise import zoh
+from railpaper.engine.crlb import crlb_std, fisher_information
+from railpaper.engine.rbpf import FilterRun, run_rbpf
+from railpaper.estimators.ekf import run_augmented_ekf
+from railpaper.experiments.rbpf_parameter_estimation import posterior
+from railpaper.experiments.rbpf_parameter_estimation.measurements import read_measurements
+from railpaper.experiments.rbpf_parameter_estimation.result import (LateralPart, LateralRecord,
+                                                                    LateralRun)
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.models import lateral_16state as L
+from railpaper.paths import DATA_DIR
+from railpaper.settling import holds_from, settling_step
+from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
+
+WITHIN = 0.05
+
+
+def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
+    """Fixed quantities and true θ from ``data/rbpf-parameter-estimation/parameters.toml``."""
+    q = load_quantities(params_path or DATA_DIR / SPEC.name / "parameters.toml",
+                        L.FIXED_KEYS + L.PARAM_NAMES)
+    return {k: q[k].value for k in L.FIXED_KEYS}, np.array([q[k].value for k in L.PARAM_NAMES])
+
+
+# ----------------------------------------------------------------------------- Part 2: lateral
+def noise_std(p: dict) -> np.ndarray:
+    """Sensor noise std of the five channels (:data:`L.CHANNELS`): m/s², m/s², m/s², m/s², rad/s."""
+    return np.array([p["noise_acc_wheelset_mps2"]] * 2 + [p["noise_acc_bogie_mps2"],
+                    p["noise_acc_body_mps2"], p["noise_yawrate_radps"]])
+
+
+def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+    """One record: an alignment profile of ``spectrum`` (seed ``seed``), the vehicle simulated
+    exactly at ``dt_s / truth_substeps``, the five channels sampled at ``dt_s`` with white sensor
+    noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
+    v = p["speed_kmh"] / 3.6
+    dtf = p["dt_s"] / p["truth_substeps"]
+    dur = p["n_steps"] * p["dt_s"]
+    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * p["wavelength_max_m"])
+    dx = min(0.05, p["wavelength_min_m"] / 2)
+    s, z = track.synthesize_profile(p["spectrum"], "alignment", length, dx, seed=seed,
+                                    wavelength_min_m=p["wavelength_min_m"],
+                                    wavelength_max_m=p["wavelength_max_m"])
+    _, _, dq = track.wheelset_inputs(s, z, v, [0.0, 2 * fixed["a"]], dtf, dur, derivative=True)
+    x = L.simulate_truth(fixed, theta, v, dtf, dq[:-1])
+    sub = p["truth_substeps"]
+    H = L.measurement_matrix(L.build_A_direct(fixed, theta, v))
+    rng = np.random.default_rng([seed, 7])
+    y = x[sub::sub][:p["n_steps"]] @ H.T
+    y = y + rng.standard_normal(y.shape) * noise_std(p)
+    u = dq[0:-1:sub][:p["n_steps"]]                       # u_k = ẏt(t_{k-1}), held over the step
+    du = np.diff(dq[::sub], axis=0)
+    return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
+                         u_var_m2ps2=dq.var(axis=0))
+
+
+def lateral_record(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+    """The record of seed ``seed``: the user's file when ``measurements_csv`` is set (every
+    seed), else :func:`simulate_lateral`."""
+    if p["measurements_csv"]:
+        return read_measurements(p["measurements_csv"], p)
+    return simulate_lateral(p, fixed, theta, seed)
+
+
+def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
+    """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
+    _, G = zoh(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6), L.input_matrix(), p["dt_s"])
+    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
+    return Q, np.diag(noise_std(p) ** 2)
+
+
+def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord):
+    """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
+    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`);
+    the ZOH's balancing is that of the prior box's centre (it changes only the rounding)."""
+    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
+    centre = theta * 0.5 * (p["prior_low"] + p["prior_high"])       # balancing only
+    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=centre)
+
+
+def lateral_rbpf(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int,
+                 scheme: str) -> FilterRun:
+    """One RBPF run on a record: ``n_particles`` particles θ × U(``prior_low``, ``prior_high``)
+    per parameter (generator ``[seed, 11]``: both schemes start from the same particles), each
+    with a Kalman filter from X = 0; ``scheme="paper"`` (Steps 1–2.6, δ = ``paper_delta``) or
+    ``"working"`` (tempering, ESS-triggered resampling, moves of log-parameters)."""
+    rng = np.random.default_rng([seed, 11])
+    theta0 = theta * rng.uniform(p["prior_low"], p["prior_high"], (p["n_particles"], 5))
+    opts = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
+            dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
+                 tempering_steps=p["tempering_steps"], log_mask=np.ones(5, bool)))
+    return run_rbpf(system, record.y, theta0, np.zeros(L.N_STATES),
+                    1e-10 * np.eye(L.N_STATES), rng, u=record.u_mps, **opts)
+
+
+def run_lateral_rbpf(p, fixed, theta, record: LateralRecord, seed: int, scheme: str
+                     ) -> np.ndarray:
+    """Normalised estimates θ̂/θ (K, 5) of one RBPF run (:func:`lateral_rbpf`)."""
+    system = filter_system(p, fixed, theta, record)
+    return lateral_rbpf(p, system, record, theta, seed, scheme).theta_mean / theta
+
+
+def lateral_crlb(p, fixed, theta, record: LateralRecord) -> dict:
+    """Relative CRLB after 350 and n_steps steps, input known / unknown (process noise)."""
+    v = p["speed_kmh"] / 3.6
+    out = {}
+    for label, var, u in (("known", record.du_var_m2ps2, record.u_mps),
+                          ("unknown", record.u_var_m2ps2, None)):
+        Q, R = filter_noise(fixed, theta, p, var)
+        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R, theta_ref=theta),
+                                  theta, record.y,
+                                  np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), u,
+                                  checkpoints=(350, p["n_steps"]))
+        for c, I in info.items():
+            out[(label, c)] = crlb_std(I) / theta
+    return out
+
+
+def lateral_ekf(p, fixed, theta, record: LateralRecord, seed, guesses: int) -> list[np.ndarray]:
+    """Normalised EKF estimates (K, 5) from ``guesses`` guesses U(prior box) x θ (generator
+    ``[seed, 13]``; NaN rows if the run diverged); K = min(ekf_steps, n_steps).  Empty on
+    a user's record (``record.seed`` None): the chapter judges the EKF on simulated records only."""
+    if record.seed is None:
+        return []
+    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
+    model = L.ekf_model(fixed, p["speed_kmh"] / 3.6, p["dt_s"])
+    rng = np.random.default_rng([seed, 13])
+    runs = []
+    for _ in range(guesses):
+        guess = theta * rng.uniform(p["prior_low"], p["prior_high"], 5)
+        K = min(p["ekf_steps"], p["n_steps"])
+        r = run_augmented_ekf(model, record.y[:K], guess, np.zeros(L.N_STATES),
+                              1e-10 * np.eye(L.N_STATES), (0.3 * theta) ** 2, Q, R,
+                              (1e-4 * theta) ** 2, u=record.u_mps[:K], divergence_bound=1e12)
+        runs.append(r.theta / theta if not r.diverged else np.full_like(r.theta, np.nan))
+    return runs
+
+
+def ekf_converged(norm: np.ndarray) -> bool:
+    """A lateral EKF run is convergent and meaningful: every final estimate within 5 %."""
+    return bool(np.all(np.isfinite(norm[-1])) and np.all(np.abs(norm[-1] - 1) <= WITHIN))
+
+
+def critical_speeds(fixed: dict, theta: np.ndarray, p: dict) -> tuple[pd.DataFrame, dict]:
+    """Least-damped real part vs speed for the three readings of "half", and the metrics (the
+    critical speeds, km/h; the least-damped real part at the chapter's speed, 1/s)."""
+    metrics = {}
+    speeds = np.arange(10.0, 200.01, 2.0)
+    halved = dict(fixed, mw=fixed["mw"] / 2, mb=fixed["mb"] / 2)
+    doubled = dict(fixed, mw=fixed["mw"] * 2, mb=fixed["mb"] * 2)
+    curves = {}
+    for key, fx in (("chosen", fixed), ("all_halved", halved), ("wheelset_bogie_doubled", doubled)):
+        re, vc = L.critical_speed(fx, theta, speeds)
+        curves[key] = re
+        metrics[f"critical_speed_kmh_{key}"] = vc * 3.6 if vc > 0 else -1
+    A = L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6)
+    metrics["least_damped_real_at_speed_per_s"] = L.least_damped(A)[0]
+    return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves}), metrics
+
+
+def lateral_metrics(runs: list[np.ndarray], suffix: str, start: int = 350,
+                    tol: float = 0.05) -> dict:
+    """Evidence metrics of one RBPF scheme on the lateral records.
+
+    Parameters
+    ----------
+    runs : list of ndarray, each (K, d)
+        Normalised estimates θ̂/θ of every record (same K).
+    suffix : str
+        Appended to every metric name (e.g. ``"_paper_scheme"``).
+    start, tol : int, float
+        The paper's claim: every parameter within ``tol`` after ``start`` steps.
+
+    Returns
+    -------
+    dict
+        ``lateral_within_5pct_from_350_rate``: records with every parameter within ``tol`` at
+        every step from ``start`` to the end; ``lateral_within_5pct_at_350_rate``: at step
+        ``start`` alone; ``lateral_bias_max_abs``: largest |mean final relative error| over the
+        parameters (simultaneous interval, :func:`max_abs_bias`); ``lateral_median_final_abs_
+        error_max``: median over records of the largest final |relative error| — each with
+        ``_low``, ``_high``, ``_n`` — and per parameter ``lateral_bias_<j>`` (mean final
+        relative error, 95 % t interval).
+    """
+    stack = np.array(runs, float)
+    finals = stack[:, -1] - 1.0
+    out = {}
+    out.update(rate([holds_from(np.abs(r - 1.0) <= tol, start).all() for r in stack])
+               .metrics(f"lateral_within_5pct_from_350_rate{suffix}"))
+    with np.errstate(invalid="ignore"):
+        at = np.all(np.abs(stack[:, start - 1] - 1.0) <= tol, axis=1)
+    out.update(rate(at).metrics(f"lateral_within_5pct_at_350_rate{suffix}"))
+    out.update(max_abs_bias(finals).metrics(f"lateral_bias_max_abs{suffix}"))
+    out.update(median_interval(np.abs(finals).max(axis=1))
+               .metrics(f"lateral_median_final_abs_error_max{suffix}"))
+    for j, name in enumerate(L.PARAM_NAMES):
+        out.update(mean_interval(finals[:, j]).metrics(f"lateral_bias_{name}{suffix}"))
+    return out
+
+
+def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
+    """Part 2: critical speed, both RBPF schemes and one EKF guess on every record (the first:
+    ``ekf_guesses`` and the CRLB), the exact posterior (IBIS) on the first ``ibis_records``.
+    Returns the part, its metrics and its timings (s)."""
+    timings = {}
+    fixed, theta = vehicle()
+    critical, metrics = critical_speeds(fixed, theta, p)
+    user = bool(p["measurements_csv"])
+    if user:
+        first = lateral_record(p, fixed, theta, p["seed"])
+        p = dict(p, n_steps=len(first.y), n_records=1)
+    n_ibis = min(p["ibis_records"], p["n_records"])
+    runs, ekf_first, crlb, ekf_count = [], [], None, None
+    spent = {"working": 0.0, "paper": 0.0, "ibis": 0.0}
+    for i in range(p["n_records"]):
+        progress(0.1 + 0.8 * i / p["n_records"], f"lateral record {i}")
+        seed = p["seed"] + i
+        rec = first if user else lateral_record(p, fixed, theta, seed)
+        system, fr = filter_system(p, fixed, theta, rec), {}
+        for scheme in ("working", "paper"):
+            t0 = time.perf_counter()
+            fr[scheme] = lateral_rbpf(p, system, rec, theta, seed, scheme)
+            spent[scheme] += time.perf_counter() - t0
+        post = None
+        if i < n_ibis:
+            t0 = time.perf_counter()
+            post = posterior.lateral_posterior(p, system, rec, theta, seed)
+            spent["ibis"] += time.perf_counter() - t0
+        ekf = []
+        if not user:
+            if i == 0:
+                progress(0.15, "CRLB and EKF")
+                t0 = time.perf_counter()
+                crlb, more = lateral_crlb_metrics(p, fixed, theta, rec)
+                metrics.update(more)
+                timings["crlb_s"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            ekf = lateral_ekf(p, fixed, theta, rec, seed, p["ekf_guesses"] if i == 0 else 1)
+            timings["ekf_lateral_s"] = (timings.get("ekf_lateral_s", 0.0)
+                                        + time.perf_counter() - t0)
+            ekf_first.append(ekf_converged(ekf[0]))
+            if i == 0:
+                ekf_count = int(sum(map(ekf_converged, ekf)))
+                metrics["ekf_lateral_converged_count"] = ekf_count
+                if p["ekf_guesses"] == 10:
+                    metrics["ekf_lateral_converged_of_10"] = ekf_count
+        runs.append(LateralRun(None if user else seed, fr["paper"].theta_mean / theta,
+                               fr["working"].theta_mean / theta, tuple(ekf),
+                               fr["paper"].theta_std / theta, fr["working"].theta_std / theta,
+                               post))
+    for scheme in ("working", "paper"):
+        timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / p["n_records"]
+    timings["ibis_lateral_per_run_s"] = spent["ibis"] / n_ibis
+    for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
+        norm = getattr(runs[0], field)                          # the illustrated record
+        steps = settling_step(np.abs(norm - 1.0) <= WITHIN)   # per parameter
+        metrics[f"steps_to_within_5pct_all{suffix}"] = (int(steps.max()) if np.all(steps > 0)
+                                                        else -1)
+        for j, name in enumerate(L.PARAM_NAMES):
+            metrics[f"steps_to_within_5pct_{name}{suffix}"] = int(steps[j])
+            metrics[f"final_relative_error_{name}{suffix}"] = float(norm[-1, j] - 1)
+    # Rao-Blackwellisation (paper §4): the augmented state (16 + 5) vs what the particles sample
+    metrics["rb_augmented_state_dim"] = L.N_STATES + theta.size
+    metrics["rb_particle_dim"] = int(runs[0].rbpf_paper_norm.shape[1])
+    t_s = np.arange(1, p["n_steps"] + 1) * p["dt_s"]
+    part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
+                       critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count)
+    if not user:
+        for field, suffix in (("rbpf_paper_norm", "_paper_scheme"),
+                              ("rbpf_working_norm", "_working_scheme")):
+            metrics.update(lateral_metrics(list(part.stack(field)), suffix, start=350, tol=WITHIN))
+        metrics.update(rate(ekf_first).metrics("lateral_ekf_converge_rate"))
+    metrics.update(posterior.lateral_metrics(part, simulated=not user))
+    return part, metrics, timings
+
+
+def lateral_timeseries(part: LateralPart) -> pd.DataFrame:
+    """The illustrated (first) record's normalised estimates θ̂/θ of both schemes against time."""
+    main, paper = part.runs[0].rbpf_working_norm, part.runs[0].rbpf_paper_norm
+    names = list(enumerate(L.PARAM_NAMES))
+    return pd.DataFrame({"t_s": part.t_s, **{f"{name}_norm": main[:, j] for j, name in names},
+                         **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
+
+
+def lateral_crlb_metrics(p, fixed, theta, rec: LateralRecord) -> tuple[pd.DataFrame, dict]:
+    """CRLB of the first record: the table of :attr:`LateralPart.crlb` and the metrics
+    ``crlb_rel_*`` (relative standard deviations, 1)."""
+    cr = lateral_crlb(p, fixed, theta, rec)
+    metrics = {}
+    rows = []
+    for j, name in enumerate(L.PARAM_NAMES):
+        metrics[f"crlb_rel_350_{name}"] = float(cr[("known", 350)][j])
+        metrics[f"crlb_rel_final_{name}"] = float(cr[("known", p["n_steps"])][j])
+        metrics[f"crlb_rel_350_unknown_input_{name}"] = float(cr[("unknown", 350)][j])
+        rows.append(dict(parameter=name, **{f"{a}_{c}": cr[(a, c)][j] for a, c in cr}))
+    return pd.DataFrame(rows), metrics
+
+

@@ -1,0 +1,94 @@
+"""The parameters of chapter ``rbpf-parameter-estimation`` (Ding et al. 2014): :data:`SPEC`.
+
+Kept apart from :mod:`railpaper.experiments.rbpf_parameter_estimation.experiment` (which re-exports it) so
+that the chapter's computation stays short; every name, default, quick value and unit is here.
+"""
+
+from __future__ import annotations
+
+from railpaper.experiments.base import ChapterSpec, Parameter
+
+P = Parameter
+SPEC = ChapterSpec(
+    name="rbpf-parameter-estimation",
+    title="RBPF versus EKF for suspension parameters of a high-speed train (Ding et al. 2014)",
+    paper="003_106973ea68498aa8.txt",
+    notebook="rbpf_parameter_estimation.ipynb",
+    quick_sizes="toy as full (40 records x 500 steps, 300 particles, IBIS 1000); lateral: 5 "
+                "records (full: 30) x 500 steps, 200 particles, both schemes, one EKF guess each, "
+                "IBIS on 5 (full: 30) with 100 (250) particles; model error: 5 (20) records",
+    notebook_requires={"lateral": True},
+    parameters=[
+        P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1 and so on (toy and "
+          "lateral); record seed is the one illustrated", minimum=0),
+        P("toy_x1", -0.4, "float", "true x1 of Eq. (18), 1"),
+        P("toy_x2", 0.5, "float", "true x2 of Eq. (18), 1"),
+        P("toy_x3", 0.5, "float", "true x3 of Eq. (18), 1"),
+        P("toy_x4", 1.0, "float", "true x4 of Eq. (18), 1"),
+        P("toy_noise_var", 0.1, "float", "variance of W and V in Eq. (18), 1", positive=True),
+        P("toy_steps", 500, "int", "measurements of each toy record", minimum=10),
+        P("toy_particles", 300, "int", "RBPF particles (toy)", minimum=2),
+        P("toy_seeds", 40, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
+          minimum=1),
+        P("toy_prior_halfwidth", 2.0, "float",
+          "RBPF prior: uniform on initial condition +- this, per parameter, 1", positive=True),
+        P("toy_tempering_steps", 50, "int", "toy working-scheme RBPF: tempering steps",
+          minimum=0),
+        P("toy_ekf_q_theta", 1e-6, "float", "EKF random-walk variance of each x_j per step, 1",
+          positive=True),
+        P("toy_bias_tol", 0.2, "float", "toy: a filter has converged when its final |error| is "
+          "at most this in every x_j (and, for 'faster', stays so), 1", positive=True),
+        P("speed_kmh", 300.0, "float", "vehicle speed, km/h", positive=True),
+        P("n_steps", 500, "int", "filter steps of each lateral record (at dt_s); the 350-step "
+          "claim is checked from step 350 to this", minimum=400),
+        P("dt_s", 0.001, "float", "filter sample time, s", positive=True),
+        P("truth_substeps", 10, "int", "truth steps per filter step (truth dt = dt_s / this)",
+          minimum=1),
+        P("spectrum", "german-low", "str", "alignment irregularity spectrum: fra-1 to fra-6, "
+          "german-low, german-high or china-hsr"),
+        P("wavelength_min_m", 1.0, "float", "shortest irregularity wavelength, m", positive=True),
+        P("wavelength_max_m", 100.0, "float", "longest irregularity wavelength, m", positive=True),
+        P("noise_acc_wheelset_mps2", 0.1, "float", "wheelset accelerometer noise std, m/s^2",
+          positive=True),
+        P("noise_acc_bogie_mps2", 0.1, "float", "bogie accelerometer noise std, m/s^2",
+          positive=True),
+        P("noise_acc_body_mps2", 0.01, "float", "car-body accelerometer noise std, m/s^2",
+          positive=True),
+        P("noise_yawrate_radps", 0.001, "float", "bogie yaw-rate gyro noise std, rad/s",
+          positive=True),
+        P("n_particles", 200, "int", "RBPF particles (lateral)", minimum=2),
+        P("prior_low", 0.5, "float", "prior box lower edge, fraction of the true value",
+          positive=True),
+        P("prior_high", 1.7, "float", "prior box upper edge, fraction of the true value",
+          positive=True),
+        P("paper_delta", 0.98, "float", "Liu-West delta of the paper scheme, 1", positive=True),
+        P("working_delta", 0.9, "float", "Liu-West delta of the working scheme, 1",
+          positive=True),
+        P("tempering_steps", 300, "int", "working scheme: likelihood tempering steps", minimum=0),
+        P("ess_fraction", 0.8, "float", "working scheme: resample when ESS < this N, 1",
+          positive=True),
+        P("n_records", 30, "int", "lateral records (Monte Carlo samples, < 1000), each filtered "
+          "by both RBPF schemes and one EKF guess", quick=5, minimum=2),
+        P("ekf_guesses", 10, "int", "initial parameter guesses of the lateral EKF on the "
+          "illustrated record (the others get one each)", minimum=1),
+        P("ekf_steps", 500, "int", "steps of each lateral EKF run (<= n_steps)", minimum=10),
+        P("toy_ibis_particles", 1000, "int", "IBIS particles of the toy's exact posterior "
+          "(every toy record, prior box of initial condition 1)", minimum=10),
+        P("ibis_particles", 250, "int", "IBIS particles of the lateral exact posterior",
+          quick=100, minimum=10),
+        P("ibis_records", 30, "int", "lateral records (the first ones, at most n_records) on "
+          "which IBIS computes the exact posterior; calibration is counted on them", quick=5,
+          minimum=1),
+        P("mismatch_records", 20, "int", "records (the first seeds, at most n_records) of the "
+          "truth plant with model error (saturating creep, nonlinear conicity, 40 Hz "
+          "low-pass), each filtered by the EKF and our tempered RBPF", quick=5, minimum=2),
+        P("measurements_csv", "", "str",
+          "user CSV (t_s, acc_w1_mps2, acc_w2_mps2, acc_b_mps2, acc_bd_mps2, yawrate_b_radps"
+          "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate",
+          path=True),
+        P("lateral", True, "bool", "run Part 2, the lateral vehicle (sweep samples of the toy "
+          "alone switch it off; the notebook needs it)"),
+    ],
+)
+
+__all__ = ["SPEC"]

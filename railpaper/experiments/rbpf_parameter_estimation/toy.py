@@ -1,0 +1,127 @@
+"""Part 1 of the ``rbpf-parameter-estimation`` chapter: Ding et al.'s Eq. (18) toy on many records.
+
+The RBPF exactly as the paper's Steps 1–2.6 (``scheme="paper"``, prior uniform on the initial
+condition ± ``toy_prior_halfwidth``), our working scheme beside it (no claim reads it), and an
+augmented-state EKF, each from the paper's initial conditions 1 = (0, 0, 0, 0) and
+2 = (−0.26, 1, 0.24, −0.5).  One record is :func:`simulate` then :func:`filter_record` on one
+generator; :func:`run_toy` does that for records ``seed`` … ``seed + toy_seeds − 1``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
+from railpaper.engine.rbpf import FilterRun, run_rbpf
+from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
+from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
+from railpaper.settling import settling_step
+
+TOY_INITS = {1: np.zeros(4), 2: np.array([-0.26, 1.0, 0.24, -0.5])}
+EKF_BOUND = 1e3       # |x_j| above this: the toy EKF has diverged; its error then counts as this
+Z90 = 1.6448536269514722    # standard normal 95 % quantile: mean ± Z90 sd is a 90 % interval
+
+
+def gaussian_covers(mean: np.ndarray, sd: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Whether ``mean ± Z90 sd`` (a particle filter's 90 % interval read as Gaussian) holds the
+    truth, per parameter (bool array of the broadcast shape)."""
+    return np.abs(np.asarray(truth) - np.asarray(mean)) <= Z90 * np.asarray(sd)
+
+
+def truth(p: dict) -> np.ndarray:
+    """The true (x1, x2, x3, x4) of Eq. (18) from the parameters ``toy_x1`` … ``toy_x4``."""
+    return np.array([p["toy_x1"], p["toy_x2"], p["toy_x3"], p["toy_x4"]])
+
+
+def system(p: dict):
+    """``system(theta)``: Eq. (18) for a batch of parameter particles, W and V of variance
+    ``toy_noise_var`` (:func:`railpaper.models.linear_toys.eq18_system`)."""
+    return eq18_system(p["toy_noise_var"], p["toy_noise_var"])
+
+
+def simulate(p: dict, rng: np.random.Generator) -> Simulation:
+    """One record of ``toy_steps`` measurements at the true x: input u ~ N(0, 1), then the
+    process and measurement noise, drawn from ``rng``."""
+    v = p["toy_noise_var"]
+    return simulate_eq18(truth(p), v, v, p["toy_steps"], rng)
+
+
+def prior(p: dict, start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``toy_particles`` particles (N, 4) uniform on ``start`` ± ``toy_prior_halfwidth``."""
+    hw = p["toy_prior_halfwidth"]
+    return rng.uniform(start - hw, start + hw, (p["toy_particles"], 4))
+
+
+def rbpf(p: dict, model, sim: Simulation, theta0: np.ndarray, rng: np.random.Generator,
+         scheme: str) -> FilterRun:
+    """The RBPF of ``model`` (from :func:`system`) from particles ``theta0`` on one record:
+    ``scheme="paper"`` (Steps 1–2.6: resample and move every step, Liu–West δ =
+    ``paper_delta``) or ``"working"`` (ours: tempering over ``toy_tempering_steps``, resampling
+    when ESS < ``ess_fraction`` N, δ = ``working_delta``).  Each particle's Kalman filter starts
+    at x = 0 with covariance I."""
+    options = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
+               dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
+                    tempering_steps=p["toy_tempering_steps"]))
+    return run_rbpf(model, sim.y, theta0, np.zeros(2), np.eye(2), rng, u=sim.u, **options)
+
+
+def ekf(p: dict, sim: Simulation, start: np.ndarray) -> EKFRun:
+    """The augmented-state EKF on one record from x = ``start`` (P_θ = I, x0 = 0 with P = I,
+    random walk of variance ``toy_ekf_q_theta`` per step on each x_j)."""
+    v = p["toy_noise_var"]
+    Q, R = v * EQ18_G @ EQ18_G.T, np.array([[v]])
+    return run_augmented_ekf(eq18_model, sim.y, start, np.zeros(2), np.eye(2), 1.0, Q, R,
+                             p["toy_ekf_q_theta"], u=sim.u, divergence_bound=EKF_BOUND)
+
+
+def filter_record(p: dict, sim: Simulation, ic: int, rng: np.random.Generator) -> ToyRun:
+    """Prior draw, both RBPF schemes (same particles) and the EKF from initial condition ``ic``."""
+    start, model = TOY_INITS[ic], system(p)
+    theta0 = prior(p, start, rng)
+    paper = rbpf(p, model, sim, theta0, rng, "paper")
+    working = rbpf(p, model, sim, theta0, rng, "working")
+    ek = ekf(p, sim, start)
+    return ToyRun(ic, start, paper.theta_mean, working.theta_mean, ek.theta, ek.diverged,
+                  ek.diverged_step, paper.theta_std, working.theta_std)
+
+
+def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
+    """One row of :attr:`ToyPart.records`: final errors, converged flags and settle steps."""
+    x, tol = truth(p), p["toy_bias_tol"]
+
+    def err(theta):                                       # max |error| over x_j per step
+        e = np.nan_to_num(np.abs(theta - x).max(axis=1), nan=EKF_BOUND)
+        return np.minimum(e, EKF_BOUND)
+
+    e_rb, e_rw, e_ek = err(run.rbpf_paper), err(run.rbpf_working), err(run.ekf)
+    if run.ekf_diverged:
+        e_ek[run.ekf_diverged_step - 1:] = EKF_BOUND
+    return dict(seed=seed, init=run.initial_condition, rbpf_err_max=e_rb[-1],
+                rbpf_working_err_max=e_rw[-1], ekf_err_max=e_ek[-1],
+                ekf_diverged=run.ekf_diverged,
+                ekf_converged=not run.ekf_diverged and e_ek[-1] <= tol,
+                rbpf_converged=bool(e_rb[-1] <= tol),
+                rbpf_settle=settling_step(e_rb <= tol, never=len(e_rb) + 1),
+                ekf_settle=settling_step(e_ek <= tol, never=len(e_ek) + 1),
+                **{f"{key}_covers_x{j + 1}": bool(c) for key, (mean, sd) in
+                   (("rbpf", (run.rbpf_paper, run.rbpf_paper_sd)),
+                    ("rbpf_working", (run.rbpf_working, run.rbpf_working_sd)))
+                   for j, c in enumerate(gaussian_covers(mean[-1], sd[-1], x))})
+
+
+def run_toy(p: dict) -> ToyPart:
+    """Eq. (18) on records ``seed`` … ``seed + toy_seeds − 1``: record i is
+    :func:`simulate` then :func:`filter_record` from initial conditions 1 and 2, all on
+    ``numpy.random.default_rng(seed + i)``."""
+    stats, illustrated = [], {}
+    for i in range(p["toy_seeds"]):
+        rng = np.random.default_rng(p["seed"] + i)
+        sim = simulate(p, rng)
+        for ic in TOY_INITS:
+            run = filter_record(p, sim, ic, rng)
+            stats.append(_record_stats(p, p["seed"] + i, run))
+            if i == 0:
+                illustrated[ic] = run
+    return ToyPart(truth=truth(p), steps=p["toy_steps"], seed=p["seed"], illustrated=illustrated,
+                   records=pd.DataFrame(stats))

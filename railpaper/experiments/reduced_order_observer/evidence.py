@@ -1,0 +1,375 @@
+"""Evidence for the claims of paper 001 (chapter ``reduced-order-observer``).
+
+Two kinds, both turned into metrics that ``data/reduced-order-observer/claims.toml`` reads:
+
+* **Monte Carlo** (:func:`monte_carlo`): the chapter's simulation for ``mc_seeds`` seeds
+  (``seed``, ``seed + 1``, …; each seed a new track profile and new sensor noise) at every speed
+  of the chapter, under BOTH readings of the paper's P0 (:data:`READINGS`).  All samples run as
+  one batch (time loop over arrays of samples), so 20 seeds × 9 speeds × 2 readings take seconds.
+  A sample of seed ``s`` at speed ``v`` uses the same profile and noise draws as the chapter's
+  single run with ``seed = s``, so seed ``seed`` reproduces the single-run metrics.
+  Per-seed values are summarised with :mod:`railpaper.stats`: medians with order-statistic
+  intervals, trends over speed paired by seed (per-seed Spearman ρ).
+* **Structure** (:func:`structure_metrics`, deterministic): exact ranks of the Kalman matrices Q0,
+  Q1 and of the reduced pair (A22, A12) in rational arithmetic, their floating-point ranks for
+  comparison, and how accurately the reduced-order observer's poles are placed.
+
+Sensor noise (the paper's D = 0.01): the chapter reads it as σ = 1 % of each measured channel's
+RMS *at the speed simulated* ("proportional"); because the body signals grow with speed, so does
+that noise.  For the force-error trend the evidence also runs every speed at a speed-independent
+noise ("fixed"): per seed, the sensor noise of the first of ``speeds_kmh`` (60 km/h) — its σ
+(1 % of each channel's RMS there) and its very draws — is added at every speed, so that the
+speeds of a seed differ in the signal only (common random numbers).
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numba
+import numpy as np
+import pandas as pd
+
+from railpaper import contact, stats, track
+from railpaper.discretise import foh
+from railpaper.estimators import reduced_order_observer as roo
+from railpaper.models import single_wheelset as sw
+from railpaper.settling import settling_time_s
+
+#: Readings of the paper's P0 (Eq. 3), default (the chapter's) first; see ``single_wheelset``.
+READINGS = sw.P0_BASES
+
+#: Shortest and longest wavelengths of the FRA spectrum's validity range, m.
+FRA_BAND_M = (1.524, 304.8)
+
+#: Pole sets (1/s) the reduced-order observer is placed at to test "poles can be placed freely".
+POLE_SETS = ([-5.0, -80.0], [-150.0, -200.0], [-1000.0, -1500.0], [-60.0 + 40.0j, -60.0 - 40.0j])
+
+#: Per-sample quantities of the Monte Carlo table, in the order of its columns.
+SAMPLE_COLUMNS = ("convergence_time_s", "predicted_convergence_time_s", "displacement_rms_error_m",
+                  "displacement_relative_rms_error", "force_rms_N", "force_rms_error_N",
+                  "force_relative_rms_error", "force_rms_error_N_fixed_noise", "z_w_rms_m")
+
+
+def all_speeds(params: dict) -> list[float]:
+    """Speeds of the main runs then of the sweep, without repeats, km/h (the run's order)."""
+    return list(dict.fromkeys(params["speeds_kmh"] + params["sweep_speeds_kmh"]))
+
+
+def profile(params: dict, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Track profile (distance_m, irregularity_m) of one seed, long enough for every speed."""
+    length_m = max(max(all_speeds(params)) / 3.6 * params["duration_s"] + 10.0, 2 * FRA_BAND_M[1])
+    return track.synthesize_profile(
+        f"fra-{params['track_class']}", "vertical", length_m, 0.05, seed,
+        wavelength_min_m=FRA_BAND_M[0], wavelength_max_m=FRA_BAND_M[1])
+
+
+def noise_draws(seed: int, speed_kmh: float, n_samples: int, salt: tuple = ()):
+    """Standard-normal sensor draws (K, 2) on [ż_c, z_c] and (K,) on q of one run."""
+    rng = np.random.default_rng([seed, int(round(speed_kmh * 1000)), *salt])
+    return rng.standard_normal((n_samples, 2)), rng.standard_normal(n_samples)
+
+
+def _plant_batch(vehicle, plant, dt_s, q):
+    """Plant response to q (K, N) from rest on q[0]: y = [ż_c, z_c] (K, N, 2) and z_w (K, N).
+
+    ``plant="linear"``: exact for q linear between samples (FOH); ``"hertz"``: RK4 with four
+    substeps per sample and q linear between samples, as the chapter's single runs (compiled:
+    :func:`_hertz_kernel`).
+    """
+    x = np.zeros((4, q.shape[1]))
+    x[1] = x[3] = q[0]
+    out = np.empty((len(q), q.shape[1], 3))
+    out[0] = x[[0, 1, 3]].T
+    if plant == "linear":
+        Phi, G0, G1 = foh(*sw.state_space(vehicle), dt_s)
+        ga, gb = (G0 - G1)[:, :1], G1[:, :1]
+        for k in range(len(q) - 1):
+            x = Phi @ x + ga * q[k] + gb * q[k + 1]
+            out[k + 1] = x[[0, 1, 3]].T
+        return out[..., :2], out[..., 2]
+    G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
+    _hertz_kernel(np.ascontiguousarray(q, dtype=float), dt_s / 4, 4, np.array([
+        vehicle.car_body_mass_kg, vehicle.wheelset_mass_kg, vehicle.suspension_damping_Ns_per_m,
+        vehicle.suspension_stiffness_N_per_m, G, P0, float(vehicle.contacts),
+        contact.static_compression(P0, G)]), out)
+    return out[..., :2], out[..., 2]
+
+
+@numba.njit(cache=True)
+def _hertz_derivative(x, q, c):
+    """:func:`railpaper.models.single_wheelset.nonlinear_derivative`, compiled; ``c`` = M_c, M_w,
+    C_p, K_p, G, P0, contacts, δ0."""
+    suspension = c[3] * (x[1] - x[3]) + c[2] * (x[0] - x[2])
+    delta = c[7] + x[3] - q
+    force = (max(delta, 0.0) / c[4]) ** 1.5 if delta > 0.0 else 0.0
+    dynamic_contact = c[6] * (force - c[5])
+    return np.array([-suspension / c[0], x[0], (suspension - dynamic_contact) / c[1], x[2]])
+
+
+@numba.njit(cache=True)
+def _hertz_kernel(q, h, substeps, c, out):
+    """RK4 of the Hertz plant from rest on q[0], ``substeps`` steps of h per sample, q linear
+    between samples (the operations of :func:`railpaper.experiments.reduced_order_observer.record.
+    _simulate_hertz`, per column of q); fills out[k, n] = [ż_c, z_c, z_w]."""
+    K, N = q.shape
+    for n in range(N):
+        x = np.array([0.0, q[0, n], 0.0, q[0, n]])
+        out[0, n, 0], out[0, n, 1], out[0, n, 2] = x[0], x[1], x[3]
+        for k in range(K - 1):
+            for j in range(substeps):
+                dq = q[k + 1, n] - q[k, n]
+                qa = q[k, n] + dq * (j + 0.0) / substeps
+                qm = q[k, n] + dq * (j + 0.5) / substeps
+                qb = q[k, n] + dq * (j + 1.0) / substeps
+                k1 = _hertz_derivative(x, qa, c)
+                k2 = _hertz_derivative(x + 0.5 * h * k1, qm, c)
+                k3 = _hertz_derivative(x + 0.5 * h * k2, qm, c)
+                k4 = _hertz_derivative(x + h * k3, qb, c)
+                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            out[k + 1, n, 0], out[k + 1, n, 1], out[k + 1, n, 2] = x[0], x[1], x[3]
+
+
+def _observer_batch(observer, y, q, x2_initial):
+    """Estimated z_w (K, N) of a discrete reduced-order observer on y (K, N, 2), q (K, N)."""
+    v = np.concatenate([y, q[..., None]], axis=2)
+    drive = v[:-1] @ observer.Gamma_now.T + v[1:] @ observer.Gamma_next.T
+    w = x2_initial - y[0] @ observer.L.T
+    z = np.empty(q.shape)
+    PhiT, L = observer.Phi.T, observer.L
+    z[0] = w[:, 1]
+    for k in range(len(q) - 1):
+        w = w @ PhiT + drive[k]
+        z[k + 1] = w[:, 1]
+    return z + y @ L[1]
+
+
+def _rms(x, axis=0):
+    return np.sqrt(np.mean(x**2, axis=axis))
+
+
+def _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference):
+    """Per-sample quantities (dict of (N,) arrays) of one reading; ``reference[i]``: column of
+    the same seed at the noise-reference speed, whose noise σ and standard-normal draws the
+    ``_fixed_noise`` samples use at every speed (common random numbers: across speeds only the
+    signal changes, not the noise)."""
+    vehicle = sw.load_parameters(p0_basis=reading)
+    A, B = sw.state_space(vehicle)
+    hold = "zoh" if params["observer_form"] == "paper" else "foh"
+    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], hold)
+    y, z_w = _plant_batch(vehicle, params["plant"], params["dt_s"], q)
+    rms_y, rms_q, rms_z = _rms(y), _rms(q), _rms(z_w)
+    x2_initial = np.column_stack([np.zeros(q.shape[1]), q[0] + params["initial_error_m"]])
+    threshold = params["convergence_fraction"] * rms_z
+    window = t_s >= params["error_window_start_s"]
+    force = sw.dynamic_contact_force_N(vehicle, z_w, q, params["plant"])
+    out = {"force_rms_N": _rms(force[window]), "z_w_rms_m": rms_z}
+    error_free = np.empty((len(t_s), 2))                   # error dynamics alone, e[k+1] = Φ e[k]
+    error_free[0] = [0.0, params["initial_error_m"]]
+    for k in range(len(t_s) - 1):
+        error_free[k + 1] = observer.Phi @ error_free[k]
+    out["predicted_convergence_time_s"] = settling_time_s(
+        t_s, np.abs(error_free[:, 1:2]) < threshold[None, :])
+    fixed = (noise_y[:, reference], noise_q[:, reference], rms_y[reference], rms_q[reference])
+    for noise, (draw_y, draw_q, sigma_y, sigma_q) in (
+            ("", (noise_y, noise_q, rms_y, rms_q)), ("_fixed_noise", fixed)):
+        y_meas = y + draw_y * params["noise_fraction"] * sigma_y
+        q_meas = q + draw_q * params["track_noise_fraction"] * sigma_q
+        z_est = _observer_batch(observer, y_meas, q_meas, x2_initial)
+        force_error = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear") - force
+        out[f"force_rms_error_N{noise}"] = _rms(force_error[window])
+        if noise:
+            continue
+        error = z_est - z_w
+        out["convergence_time_s"] = settling_time_s(t_s, np.abs(error) < threshold)
+        out["displacement_rms_error_m"] = _rms(error[window])
+        out["displacement_relative_rms_error"] = out["displacement_rms_error_m"] / rms_z
+        out["force_relative_rms_error"] = out["force_rms_error_N"] / out["force_rms_N"]
+    return out
+
+
+def monte_carlo(params: dict, progress=None) -> pd.DataFrame:
+    """The Monte Carlo table: one row per (seed, speed, reading), columns :data:`SAMPLE_COLUMNS`.
+
+    Parameters
+    ----------
+    params : dict
+        The chapter's resolved parameters (``seed``, ``mc_seeds``, speeds, noise, observer, …).
+    progress : callable, optional
+        ``progress(fraction, message)``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``seed, speed_kmh, reading`` and :data:`SAMPLE_COLUMNS` (SI units; a convergence
+        time of -1 means the error never stayed below the threshold).
+    """
+    progress = progress or (lambda fraction, message: None)
+    speeds = all_speeds(params)
+    seeds = list(range(params["seed"], params["seed"] + params["mc_seeds"]))
+    reference_speed = params["speeds_kmh"][0]
+    columns_q, columns_ny, columns_nq, keys = [], [], [], []
+    for seed in seeds:
+        distance_m, profile_m = profile(params, seed)
+        for speed in speeds:
+            t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0],
+                                           params["dt_s"], params["duration_s"])
+            ny, nq = noise_draws(seed, speed, len(t_s))
+            columns_q.append(q[:, 0])
+            columns_ny.append(ny)
+            columns_nq.append(nq)
+            keys.append((seed, speed))
+    q = np.column_stack(columns_q)
+    noise_y, noise_q = np.stack(columns_ny, axis=1), np.column_stack(columns_nq)
+    del columns_q, columns_ny, columns_nq
+    index = {key: i for i, key in enumerate(keys)}
+    reference = np.array([index[(seed, reference_speed)] for seed, _ in keys])
+    frames = []
+    for i, reading in enumerate(READINGS):
+        progress(i / len(READINGS), f"Monte Carlo, P0 per {reading}")
+        samples = _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference)
+        frame = pd.DataFrame(keys, columns=["seed", "speed_kmh"])
+        frame["reading"] = reading
+        for name in SAMPLE_COLUMNS:
+            frame[name] = samples[name]
+        frames.append(frame)
+    progress(1.0, "Monte Carlo done")
+    return pd.concat(frames, ignore_index=True)
+
+
+def _per_seed(table: pd.DataFrame, column: str, speeds: list[float]) -> np.ndarray:
+    """values[seed, speed] of one column (speeds in the given order)."""
+    wide = table.pivot(index="seed", columns="speed_kmh", values=column)
+    return wide[speeds].to_numpy()
+
+
+def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
+    """Metrics the claim rules read, for every reading (suffix ``_<reading>``).
+
+    * ``mc_<q>_worst_<r>``: median over seeds of the worse of the paper's speeds (``speeds_kmh``)
+      for the convergence time (never converged counts as the run's duration), the relative RMS
+      displacement error and the relative RMS force error; with ``_low``, ``_high``, ``_n``;
+    * ``mc_trend_<q>_rho_<r>``: median over seeds of the per-seed Spearman ρ(speed, q) over every
+      speed of the run (paired: the same seed's track and noise at each speed), with ``_low``,
+      ``_high``, ``_n``, ``_sign_p``, ``_rising_fraction``;
+    * ``mc_ratio_<q>_<r>`` for the force quantities: median over seeds of the value at the top
+      speed over the value at the bottom speed (the size of a trend), with its interval;
+    * ``mc_convergence_never_<r>``: samples whose error never settled (any speed).
+    """
+    metrics = {}
+    speeds = sorted(all_speeds(params))
+    for reading in READINGS:
+        t = table[table.reading == reading].copy()
+        metrics[f"mc_convergence_never_{reading}"] = int((t.convergence_time_s < 0).sum())
+        for column in ("convergence_time_s", "predicted_convergence_time_s"):
+            t[column] = t[column].where(t[column] >= 0, params["duration_s"])   # censored
+        for column in ("convergence_time_s", "displacement_relative_rms_error",
+                       "force_relative_rms_error"):
+            worst = _per_seed(t, column, params["speeds_kmh"]).max(axis=1)
+            metrics.update(stats.median_interval(worst).metrics(f"mc_{column}_worst_{reading}"))
+        for column, name in (("convergence_time_s", "convergence_time"),
+                             ("predicted_convergence_time_s", "predicted_convergence_time"),
+                             ("force_rms_N", "force_rms"), ("force_rms_error_N", "force_rms_error"),
+                             ("force_rms_error_N_fixed_noise", "force_rms_error_fixed_noise"),
+                             ("force_relative_rms_error", "force_relative_rms_error")):
+            if len(speeds) < 2:             # a run at one speed has no trend with speed
+                continue                    # (its trend claims show as missing)
+            values = _per_seed(t, column, speeds)
+            metrics.update(stats.paired_trend(values).metrics(f"mc_trend_{name}_rho_{reading}"))
+            if column.startswith("force"):                  # effect size of the force trends
+                metrics.update(stats.median_interval(values[:, -1] / values[:, 0]).metrics(
+                    f"mc_ratio_{name}_{reading}"))
+    return metrics
+
+
+def legacy_band_metrics(table: pd.DataFrame, params: dict) -> dict:
+    """Per-speed median and 95 % quantile over seeds (the chapter's reading), as before."""
+    t = table[table.reading == params["p0_basis"]]
+    out = {}
+    for speed in params["speeds_kmh"]:
+        at = t[t.speed_kmh == speed]
+        for column in ("convergence_time_s", "force_relative_rms_error"):
+            out[f"mc_{column}_median_{speed:g}kmh"] = float(at[column].quantile(0.5))
+            out[f"mc_{column}_p95_{speed:g}kmh"] = float(at[column].quantile(0.95))
+    return out
+
+
+# ---- structure (deterministic) --------------------------------------------------------------
+
+def exact_rank(matrix) -> int:
+    """Rank in exact rational arithmetic of a matrix of floats (each taken as exact) or Fractions."""
+    rows = [[x if isinstance(x, Fraction) else Fraction(float(x)) for x in row] for row in matrix]
+    rank = 0
+    for col in range(len(rows[0]) if rows else 0):
+        pivot = next((r for r in range(rank, len(rows)) if rows[r][col] != 0), None)
+        if pivot is None:
+            continue
+        rows[rank], rows[pivot] = rows[pivot], rows[rank]
+        for r in range(rank + 1, len(rows)):
+            factor = rows[r][col] / rows[rank][col]
+            rows[r] = [a - factor * b for a, b in zip(rows[r], rows[rank])]
+        rank += 1
+    return rank
+
+
+def exact_ctrb(A, B) -> list[list[Fraction]]:
+    """Kalman matrix [B, AB, …, A^(n-1) B] computed exactly from float A (n, n), B (n, m).
+
+    The observability matrix of (A, C) is the transpose of ``exact_ctrb(A.T, C.T)`` (same rank).
+    """
+    A = [[Fraction(float(x)) for x in row] for row in np.asarray(A)]
+    block = [[Fraction(float(x)) for x in row] for row in np.asarray(B)]
+    n, blocks = len(A), [block]
+    for _ in range(n - 1):
+        block = [[sum(A[i][k] * block[k][j] for k in range(n)) for j in range(len(block[0]))]
+                 for i in range(n)]
+        blocks.append(block)
+    return [[x for b in blocks for x in b[i]] for i in range(n)]
+
+
+def _pbh_rank(A, M, observability=False) -> int:
+    n = A.shape[0]
+    stack = (lambda lam: np.vstack([lam * np.eye(n) - A, M])) if observability else \
+        (lambda lam: np.hstack([lam * np.eye(n) - A, M]))
+    return int(min(np.linalg.matrix_rank(stack(lam)) for lam in np.linalg.eigvals(A)))
+
+
+def _pole_error(A, B, poles) -> float:
+    placed = np.linalg.eigvals(roo.design(A, B, 2, poles).F)
+    want = np.asarray(poles, dtype=complex)
+    key = lambda z: (round(z.real, 6), round(z.imag, 6))   # noqa: E731
+    placed, want = sorted(placed, key=key), sorted(want, key=key)
+    return float(max(abs(p - w) / abs(w) for p, w in zip(placed, want)))
+
+
+def structure_metrics(params: dict) -> dict:
+    """Deterministic evidence per reading ``r``: ``rank_Q0_exact_r``, ``rank_Q1_exact_r``,
+    ``rank_reduced_exact_r`` (of [A12; A12 A22], needs 2), the same ranks in floating point
+    (``_numpy``, numpy's default tolerance; ``_pbh``, Popov–Belevitch–Hautus), and
+    ``pole_placement_relative_error_r`` (largest relative error of the placed poles over the
+    chapter's poles and :data:`POLE_SETS`); and over both readings ``rank_Q0_Q1_exact_min``,
+    ``rank_reduced_exact_min``, ``pole_placement_relative_error_max``."""
+    import control
+    out = {}
+    for reading in READINGS:
+        vehicle = sw.load_parameters(p0_basis=reading)
+        A, B = sw.state_space(vehicle)
+        C = sw.paper_output_matrix(vehicle)
+        _, A12, _, A22, _, _ = roo.partition(A, B, 2)
+        out[f"rank_Q0_exact_{reading}"] = exact_rank(exact_ctrb(A, B))
+        out[f"rank_Q1_exact_{reading}"] = exact_rank(exact_ctrb(A.T, C.T))
+        out[f"rank_reduced_exact_{reading}"] = exact_rank(exact_ctrb(A22.T, A12.T))
+        out[f"rank_Q0_numpy_{reading}"] = int(np.linalg.matrix_rank(control.ctrb(A, B)))
+        out[f"rank_Q1_numpy_{reading}"] = int(np.linalg.matrix_rank(control.obsv(A, C)))
+        out[f"rank_reduced_numpy_{reading}"] = int(np.linalg.matrix_rank(control.obsv(A22, A12)))
+        out[f"rank_Q0_pbh_{reading}"] = _pbh_rank(A, B)
+        out[f"rank_Q1_pbh_{reading}"] = _pbh_rank(A, C, observability=True)
+        out[f"rank_reduced_pbh_{reading}"] = _pbh_rank(A22, A12, observability=True)
+        out[f"pole_placement_relative_error_{reading}"] = max(
+            _pole_error(A, B, poles) for poles in [params["observer_poles"], *POLE_SETS])
+    out["rank_Q0_Q1_exact_min"] = min(out[f"rank_{m}_exact_{r}"] for m in ("Q0", "Q1")
+                                      for r in READINGS)
+    out["rank_reduced_exact_min"] = min(out[f"rank_reduced_exact_{r}"] for r in READINGS)
+    out["pole_placement_relative_error_max"] = max(
+        out[f"pole_placement_relative_error_{r}"] for r in READINGS)
+    return out

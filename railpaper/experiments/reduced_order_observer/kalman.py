@@ -1,0 +1,295 @@
+"""A wheel–rail force estimate that survives sensor noise (chapter ``reduced-order-observer``).
+
+On the measurements the paper's observer sees — ``y = [ż_c, z_c]`` with sensor noise and the
+irregularity ``q`` — this module runs, besides that observer:
+
+* a **Kalman filter** of the single-wheelset model augmented with a second-order shaping filter
+  for ``q`` (the track spectrum at the speed run, :func:`shaping_filter`), so that ``q`` is a
+  state and its record a measurement; the augmented model is discretised exactly (matrix
+  exponential, Van Loan for the process noise: :func:`kalman_model`);
+* its **Rauch–Tung–Striebel smoother** (offline: it uses the whole record).
+
+Both come from :mod:`railpaper.estimators.kalman_smoother` (time-varying gains computed once per
+speed and noise level, then applied to every seed).  The force is ``K_r (ẑ_w − q̂)``.
+
+What the filter is told: the sensor noise σ of each body channel as ``noise_fraction`` × the
+channel's stationary standard deviation under the model at that speed (the sensor's stated
+accuracy relative to the expected signal; the simulated noise is that fraction of each record's
+own RMS); the noise on ``q`` as ``track_noise_fraction`` × the stationary standard deviation of
+``q``, at least :data:`Q_NOISE_FLOOR` of it; the prior of the first step: mean = the observer's
+initial guess (body states from the first measurement, ``z_w`` off by ``initial_error_m``,
+``q`` from its first sample, ``q̇ = 0``), covariance = the model's stationary covariance plus
+``initial_error_m``² on ``z_w``.
+
+Every sample is a record of the chapter's Monte Carlo: seed ``s`` at speed ``v`` has the track
+profile and the standard-normal sensor draws of the chapter's single run with ``seed = s``
+(:func:`evidence.noise_draws`), scaled to each noise level (common random numbers across
+levels), so the observer's ratios at the chapter's noise equal the Monte Carlo table's.  Two
+sweeps: every seed at every sensor noise level of :func:`noise_levels` (the run's noise on q),
+and the first :data:`TRACK_NOISE_SEEDS` seeds at every noise level on the q record of
+:data:`TRACK_NOISE_FRACTIONS` (the run's sensor noise): all three estimators take q as given.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.linalg import solve_discrete_lyapunov
+
+from railpaper import stats, track
+from railpaper.estimators import kalman_baseline as kb
+from railpaper.estimators import kalman_smoother as ks
+from railpaper.estimators import reduced_order_observer as roo
+from railpaper.experiments.reduced_order_observer import evidence
+from railpaper.experiments import track_shaping
+from railpaper.models import single_wheelset as sw
+
+#: Sensor-noise levels (σ / channel RMS) of the comparison; the run's ``noise_fraction`` is added.
+NOISE_FRACTIONS = (1e-4, 1e-3, 1e-2, 3e-2)
+
+#: Noise levels on the q record (σ / RMS of q) of the track-noise sweep, at the run's sensor
+#: noise, on the first ``TRACK_NOISE_SEEDS`` seeds.
+TRACK_NOISE_FRACTIONS = (1e-5, 1e-4, 1e-3)
+TRACK_NOISE_SEEDS = 5
+
+#: Smallest σ of the q record the filter assumes, as a fraction of q's stationary std.
+Q_NOISE_FLOOR = 1e-6
+
+#: Smallest σ of a body channel the filter assumes (a noise-free run), fraction of its std.
+Y_NOISE_FLOOR = 1e-6
+
+#: The estimators compared, with their display names.
+ESTIMATORS = {"observer": "paper's observer", "kalman": "Kalman filter",
+              "smoother": "RTS smoother (offline)"}
+
+
+def shaping_filter(track_class: int, speed_mps: float) -> kb.ShapingFilter:
+    """Second-order shaping filter fitted to the FRA vertical spectrum seen at speed V.
+
+    The temporal one-sided PSD is ``S(Ω = ω/V)/V`` over the profile's wavelength band
+    (:data:`evidence.FRA_BAND_M`), with the band's variance as a constraint.
+    """
+    return track_shaping.shaping_filter(f"fra-{track_class}", speed_mps, evidence.FRA_BAND_M)[0]
+
+
+@dataclass(frozen=True)
+class KalmanModel:
+    """The augmented model ``x = [ż_c, z_c, ż_w, z_w, q, q̇]`` discretised exactly.
+
+    Attributes
+    ----------
+    F, Q : ndarray, shape (6, 6)
+        ``e^{A dt}`` and the process-noise covariance over a step (Van Loan).
+    H : ndarray, shape (3, 6)
+        Measured ``[ż_c, z_c, q]``.
+    P_stationary : ndarray, shape (6, 6)
+        Stationary covariance (``P = F P Fᵀ + Q``).
+    """
+
+    F: np.ndarray
+    Q: np.ndarray
+    H: np.ndarray
+    P_stationary: np.ndarray
+
+    @property
+    def stationary_std(self) -> np.ndarray:
+        """Stationary standard deviation of each state (SI units)."""
+        return np.sqrt(np.diag(self.P_stationary))
+
+
+def kalman_model(A: np.ndarray, B: np.ndarray, shaping: kb.ShapingFilter, dt_s: float) -> KalmanModel:
+    """Plant ``(A, B)`` driven by ``q`` from ``shaping``: exact discretisation over ``dt_s``."""
+    Aa, Ga, Ca = kb.augment(A, B, np.eye(A.shape[0])[:2], [shaping])
+    H = np.vstack([Ca, np.eye(Aa.shape[0])[A.shape[0]]])               # [ż_c, z_c] and q
+    F, Q = kb.discretise_noise(Aa, Ga, np.eye(1), dt_s)
+    return KalmanModel(F=F, Q=Q, H=H, P_stationary=solve_discrete_lyapunov(F, Q))
+
+
+def noise_levels(params: dict) -> list[float]:
+    """The comparison's noise levels: :data:`NOISE_FRACTIONS` and the run's ``noise_fraction``."""
+    return sorted(set(NOISE_FRACTIONS) | {float(params["noise_fraction"])})
+
+
+def filter_covariances(model: KalmanModel, configs, params: dict):
+    """``(R, P0)`` of each ``(sensor noise fraction, track noise fraction)`` in ``configs``
+    (leading axis of R), as the module docstring says."""
+    std = model.stationary_std
+    R = np.array([np.diag([(max(f, Y_NOISE_FLOOR) * std[0]) ** 2,
+                           (max(f, Y_NOISE_FLOOR) * std[1]) ** 2,
+                           (max(fq, Q_NOISE_FLOOR) * std[4]) ** 2]) for f, fq in configs])
+    P0 = model.P_stationary + np.diag([0.0, 0.0, 0.0, params["initial_error_m"] ** 2, 0.0, 0.0])
+    return R, P0
+
+
+@dataclass(frozen=True)
+class ForceEstimates:
+    """One record (seed ``seed``, the run's noise) with every estimator's force, N.
+
+    Attributes
+    ----------
+    t_s : ndarray (K,)
+    force_true_N, observer_N, kalman_N, smoother_N : ndarray (K,)
+    """
+
+    t_s: np.ndarray
+    force_true_N: np.ndarray
+    observer_N: np.ndarray
+    kalman_N: np.ndarray
+    smoother_N: np.ndarray
+
+
+@dataclass(frozen=True)
+class KalmanComparison:
+    """The estimators on the chapter's Monte Carlo records at several noise levels.
+
+    Attributes
+    ----------
+    samples : DataFrame
+        One row per (seed, speed_kmh, noise_fraction, track_noise_fraction, estimator, sweep):
+        ``force_rms_N`` (true force over the error window, N), ``force_rms_error_N`` (N) and
+        ``ratio`` (their quotient), ``q_rms_m`` (RMS of the record's q, m); ``sweep`` is ``"sensor"`` (every seed, every sensor noise
+        level, the run's track noise) or ``"track"`` (the first seeds, the run's sensor noise,
+        every track noise level).
+    examples : dict of float to ForceEstimates
+        Per speed, the forces of seed ``seed`` at the run's ``noise_fraction``.
+    shaping : dict of float to ShapingFilter
+        The fitted track shaping filter per speed.
+    """
+
+    samples: pd.DataFrame
+    examples: dict
+    shaping: dict
+
+
+def _rms(x, axis=0):
+    return np.sqrt(np.mean(x**2, axis=axis))
+
+
+@dataclass(frozen=True)
+class _Records:
+    """Truth and standard-normal sensor draws of S records at one speed (columns = seeds)."""
+
+    seeds: list
+    t_s: np.ndarray
+    q: np.ndarray          # (K, S) true irregularity, m
+    y: np.ndarray          # (K, S, 2) true [ż_c, z_c]
+    force: np.ndarray      # (K, S) true dynamic force, N
+    draws_y: np.ndarray    # (K, S, 2)
+    draws_q: np.ndarray    # (K, S)
+
+    def first(self, n: int) -> "_Records":
+        return _Records(self.seeds[:n], self.t_s, self.q[:, :n], self.y[:, :n], self.force[:, :n],
+                        self.draws_y[:, :n], self.draws_q[:, :n])
+
+
+def _simulate(vehicle, params, speed, profiles) -> _Records:
+    """The plant on every seed's profile at one speed (the chapter's records and draws)."""
+    columns_q, draws_y, draws_q = [], [], []
+    for seed, (distance_m, profile_m) in profiles.items():
+        t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], params["dt_s"],
+                                       params["duration_s"])
+        ny, nq = evidence.noise_draws(seed, speed, len(t_s))
+        columns_q.append(q[:, 0])
+        draws_y.append(ny)
+        draws_q.append(nq)
+    q = np.column_stack(columns_q)                                      # (K, S)
+    y, z_w = evidence._plant_batch(vehicle, params["plant"], params["dt_s"], q)
+    return _Records(list(profiles), t_s, q, y,
+                    sw.dynamic_contact_force_N(vehicle, z_w, q, params["plant"]),
+                    np.stack(draws_y, axis=1), np.column_stack(draws_q))
+
+
+def _speed_samples(vehicle, model, observer, params, speed, records: _Records, configs):
+    """Per-sample rows at one speed (every record, every ``(sensor noise fraction, track noise
+    fraction)`` of ``configs``) and the first record's forces at the first config."""
+    seeds, t_s, q, y, force = records.seeds, records.t_s, records.q, records.y, records.force
+    window = t_s >= params["error_window_start_s"]
+    force_rms, q_rms = _rms(force[window]), _rms(q)                    # (S,)
+    L, S = len(configs), len(seeds)
+    sensor, track_noise = (np.array([c[i] for c in configs])[:, None] for i in (0, 1))
+    meas = np.empty((len(q), L, S, 3))                                  # [ż_c, z_c, q] measured
+    meas[..., :2] = y[:, None] + records.draws_y[:, None] * sensor[..., None] * _rms(y)
+    meas[..., 2] = q[:, None] + records.draws_q[:, None] * track_noise * _rms(q)
+    x2_initial = np.stack([np.zeros(S), q[0] + params["initial_error_m"]], axis=-1)   # (S, 2)
+    estimates = {"observer": sw.dynamic_contact_force_N(vehicle, evidence._observer_batch(
+        observer, meas[..., :2].reshape(len(q), L * S, 2), meas[..., 2].reshape(len(q), L * S),
+        np.tile(x2_initial, (L, 1))).reshape(len(q), L, S), meas[..., 2])}
+    R, P0 = filter_covariances(model, configs, params)
+    gains = ks.gains(model.F, model.Q, model.H, R, P0, len(t_s))        # one model per config
+    x0 = np.concatenate([meas[0, ..., :2], np.broadcast_to(x2_initial, (L, S, 2)),
+                         meas[0, ..., 2:], np.zeros((L, S, 1))], axis=-1)
+    x_filtered, innovations = ks.filter_means(gains, model.F, model.H, meas, x0)
+    k_r = vehicle.contact_stiffness_N_per_m
+    estimates["kalman"] = k_r * (x_filtered[..., 3] - x_filtered[..., 4])
+    x_smoothed = ks.smoother_means(gains, model.F, model.H, innovations, x_filtered)
+    del x_filtered, innovations, gains
+    estimates["smoother"] = k_r * (x_smoothed[..., 3] - x_smoothed[..., 4])
+    rows = []
+    for name, f_est in estimates.items():
+        error_rms = _rms((f_est - force[:, None])[window])               # (L, S)
+        for i, (level, track_level) in enumerate(configs):
+            for j, seed in enumerate(seeds):
+                rows.append((seed, speed, level, track_level, name, force_rms[j],
+                             error_rms[i, j], error_rms[i, j] / force_rms[j], q_rms[j]))
+    example = ForceEstimates(t_s=t_s, force_true_N=force[:, 0],
+                             **{f"{k}_N": v[:, 0, 0] for k, v in estimates.items()})
+    return rows, example
+
+
+def compare(params: dict, progress=None) -> KalmanComparison:
+    """The paper's observer, the Kalman filter and the smoother at the run's speeds
+    (``speeds_kmh``), reading ``p0_basis``: on ``mc_seeds`` seeds × :func:`noise_levels` (track
+    noise ``track_noise_fraction``), and on the first :data:`TRACK_NOISE_SEEDS` seeds ×
+    :data:`TRACK_NOISE_FRACTIONS` at the run's sensor noise."""
+    progress = progress or (lambda fraction, message: None)
+    vehicle = sw.load_parameters(p0_basis=params["p0_basis"])
+    A, B = sw.state_space(vehicle)
+    hold = "zoh" if params["observer_form"] == "paper" else "foh"
+    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], hold)
+    profiles = {seed: evidence.profile(params, seed)
+                for seed in range(params["seed"], params["seed"] + params["mc_seeds"])}
+    levels = noise_levels(params)
+    run_noise, run_track = float(params["noise_fraction"]), float(params["track_noise_fraction"])
+    sensor_configs = [(run_noise, run_track)] + [(f, run_track) for f in levels if f != run_noise]
+    track_configs = [(run_noise, f) for f in TRACK_NOISE_FRACTIONS]
+    rows, examples, shaping = [], {}, {}
+    for i, speed in enumerate(params["speeds_kmh"]):
+        progress(i / len(params["speeds_kmh"]), f"Kalman filter and smoother, {speed:g} km/h")
+        shaping[speed] = shaping_filter(params["track_class"], speed / 3.6)
+        model = kalman_model(A, B, shaping[speed], params["dt_s"])
+        records = _simulate(vehicle, params, speed, profiles)
+        speed_rows, examples[speed] = _speed_samples(vehicle, model, observer, params, speed,
+                                                     records, sensor_configs)
+        rows += [r + ("sensor",) for r in speed_rows]
+        speed_rows, _ = _speed_samples(vehicle, model, observer, params, speed,
+                                       records.first(TRACK_NOISE_SEEDS), track_configs)
+        rows += [r + ("track",) for r in speed_rows]
+    samples = pd.DataFrame(rows, columns=["seed", "speed_kmh", "noise_fraction",
+                                          "track_noise_fraction", "estimator", "force_rms_N",
+                                          "force_rms_error_N", "ratio", "q_rms_m", "sweep"])
+    return KalmanComparison(samples=samples, examples=examples, shaping=shaping)
+
+
+def comparison_metrics(comparison: KalmanComparison, params: dict) -> dict:
+    """At the run's ``noise_fraction``, per speed ``<v>kmh``:
+
+    * ``force_rms_error_ratio_{kalman,smoother}_<v>kmh``: RMS force error / RMS force of seed
+      ``seed`` (the single record);
+    * ``mc_force_rms_error_ratio_{observer,kalman,smoother}_<v>kmh``: median over the
+      ``mc_seeds`` seeds with its 95 % order-statistic interval (``_low``, ``_high``, ``_n``).
+    """
+    s = comparison.samples
+    at = s[(s.sweep == "sensor") & (s.noise_fraction == float(params["noise_fraction"]))]
+    metrics = {}
+    for speed in params["speeds_kmh"]:
+        lab = f"{speed:g}kmh"
+        for name in ESTIMATORS:
+            rows = at[(at.speed_kmh == speed) & (at.estimator == name)].sort_values("seed")
+            if name != "observer":
+                metrics[f"force_rms_error_ratio_{name}_{lab}"] = float(
+                    rows[rows.seed == params["seed"]].ratio.iloc[0])
+            metrics.update(stats.median_interval(rows.ratio.to_numpy()).metrics(
+                f"mc_force_rms_error_ratio_{name}_{lab}"))
+    return metrics

@@ -1,0 +1,168 @@
+"""Chapter partial-state-observer: the Monte Carlo evidence its claim rules read, against
+independent references (brute-force loops, scipy, the library's single-run simulators)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats as st
+
+from railpaper.data import data_path, load_quantities, values
+from railpaper.discretise import foh, simulate_foh
+from railpaper.estimators import kalman_baseline as kb
+from railpaper.experiments.partial_state_observer import experiment as ch
+from railpaper.experiments.partial_state_observer import evidence as ev
+from railpaper.models import vertical_10dof as v10
+
+
+def brute_settle(t, err, thr):
+    """Smallest k with |err[j]| < thr for every j >= k (all columns); -1 if none."""
+    for k in range(len(t)):
+        if np.all(np.abs(err[k:]) < thr):
+            return t[k]
+    return -1.0
+
+
+def test_settle_times_match_brute_force():
+    rng = np.random.default_rng(3)
+    t = np.arange(60) * 0.1
+    err = rng.standard_normal((4, 3, 60, 2)) * np.exp(-t)[:, None]
+    err[1, 2, -1, 0] = 9.0                                    # fails at the last sample
+    err[2, 0] = 0.0                                           # always below: settles at t = 0
+    thr = np.abs(rng.standard_normal((4, 3, 2))) * 0.05 + 0.01
+    got = ev.settle_times_s(t, err, thr)
+    for i in range(4):
+        for j in range(3):
+            assert got[i, j] == brute_settle(t, err[i, j], thr[i, j])
+    assert got[1, 2] == -1.0 and got[2, 0] == 0.0
+
+
+def test_run_measures_by_hand():
+    """Two wheelsets would be four; the formulas are per column, so a hand case with known sums."""
+    t = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
+    z = np.tile(np.array([[1.0], [-1.0], [1.0], [-1.0], [1.0]]), (1, 4)) * [1, 2, 3, 4]
+    err = np.zeros((5, 4))
+    err[0] = 0.5                                              # initial error, gone from t = 0.5
+    err[2:, 0] = [0.1, -0.1, 0.1]                              # wheelset 1 oscillates after 1 s
+    m = ev.run_measures(t, z, z + err, 0.2, 0.05, 1.0)
+    # threshold 5 % of RMS(z_i) = 0.05 i: wheelset 1 never settles (0.1 > 0.05 at the end)
+    assert m["convergence_time_s"] == 2.0 and not m["converged"]      # censored at the duration
+    assert m["convergence_time_fixed_s"] == 0.5                        # fixed 0.2 > 0.1
+    assert m["max_error_after_1s_m"] == pytest.approx(0.1)
+    rel = np.array([0.1, 0, 0, 0])                           # mean |err| / RMS(z_i) after 1 s
+    assert m["biggest_mean_relative_error"] == pytest.approx(rel.max())
+    assert m["mean_relative_error"] == pytest.approx(rel.mean())
+    assert m["relative_rms_error"] == pytest.approx(np.mean([0.1, 0, 0, 0]))
+    assert m["rms_error_m"] == pytest.approx(np.sqrt(3 * 0.01 / 12))
+    ok = ev.run_measures(t, z, z + np.where(t[:, None] < 1, 0.5, 0.0), 0.2, 0.05, 1.0)
+    assert ok["converged"] and ok["convergence_time_s"] == 1.0
+
+
+def _runs_table(rng, seeds=7, speeds=(60.0, 80.0, 120.0, 160.0)):
+    rows = []
+    for reading in ev.READINGS:
+        for seed in range(seeds):
+            for j, v in enumerate(speeds):
+                for est in ("paper", "paper_noisefree", "paper_fixednoise", "hb0"):
+                    rows.append({"reading": reading, "seed": 100 + seed, "speed_kmh": v,
+                                 "estimator": est, "converged": bool(rng.random() < 0.9),
+                                 **{c: float(rng.random() + 0.1 * j) for c in (
+                                     "convergence_time_s", "convergence_time_fixed_s",
+                                     "max_error_after_1s_m", "relative_rms_error", "rms_error_m",
+                                     "biggest_mean_relative_error")}})
+    return pd.DataFrame(rows).sample(frac=1.0, random_state=1)     # order must not matter
+
+
+def test_evidence_metrics_against_scipy():
+    rng = np.random.default_rng(5)
+    mc = _runs_table(rng)
+    out = ev.evidence_metrics(mc, "symbols")
+    sub = mc[mc.reading == "symbols"]
+
+    def grid(est, col):
+        s = sub[sub.estimator == est].sort_values(["seed", "speed_kmh"])
+        return s[col].to_numpy().reshape(7, 4)
+
+    conv = grid("paper", "convergence_time_s").mean(axis=1)
+    assert out["mc_convergence_time_s_symbols"] == pytest.approx(np.median(conv))
+    # order-statistic interval for n = 7 at 95 %: ranks 1 and 7 (P(B(7, 1/2) <= 0) = 0.0078)
+    assert out["mc_convergence_time_s_symbols_low"] == pytest.approx(conv.min())
+    assert out["mc_convergence_time_s_symbols_n"] == 7
+    k = int(grid("paper", "converged").sum())
+    ci = st.binomtest(k, 28).proportion_ci(0.95, method="exact")
+    assert out["mc_converged_rate_symbols"] == pytest.approx(k / 28)
+    assert out["mc_converged_rate_symbols_low"] == pytest.approx(ci.low)
+    assert out["mc_converged_rate_symbols_high"] == pytest.approx(ci.high)
+    for stem, est, col in (("mc_trend_max_error_rho", "paper", "max_error_after_1s_m"),
+                           ("mc_trend_oscillation_fixednoise_rho", "paper_fixednoise", "rms_error_m")):
+        rhos = [st.spearmanr([60, 80, 120, 160], row).statistic for row in grid(est, col)]
+        assert out[f"{stem}_symbols"] == pytest.approx(np.median(rhos))
+        rising = sum(r > 0 for r in rhos)
+        assert out[f"{stem}_symbols_rising_fraction"] == pytest.approx(rising / 7)
+    top = grid("paper", "biggest_mean_relative_error")[:, -1]
+    assert out["mc_biggest_mean_relative_error_symbols"] == pytest.approx(np.median(top))
+    assert "mc_convergence_time_s_labels" not in out
+
+
+def test_printed_lmi19_cannot_be_negative_definite():
+    """Random P > 0 and G: the printed (19) always has a non-negative eigenvalue."""
+    rng = np.random.default_rng(2)
+    p, n, m2 = 3, 5, 4
+    H1, H2 = rng.standard_normal((p, n)), rng.standard_normal((m2, n))
+    N1, N2 = rng.standard_normal((p, p)), rng.standard_normal((m2, p))
+    for _ in range(50):
+        R = rng.standard_normal((p, p))
+        P, G = R @ R.T + 0.1 * np.eye(p), rng.standard_normal((p, m2))
+        D = P @ N1 + N1.T @ P - G @ N2 - N2.T @ G.T
+        M = np.block([[D, P @ H1, G @ H2], [H1.T @ P, np.zeros((n, n)), np.zeros((n, n))],
+                      [H2.T @ G.T, np.zeros((n, n)), np.zeros((n, n))]])
+        assert np.linalg.eigvalsh(M).max() >= -1e-12
+    out = ev.printed_lmi19_blocks(H1, H2)
+    assert out["lmi19_printed_feasible"] is False and out["lmi19_printed_zero_block_size"] == 2 * n
+
+
+def test_readings_of_table1():
+    labels, symbols = ev.suspension("labels"), ev.suspension("symbols")
+    assert labels["primary_stiffness_N_per_m"] == 2.14e6 == symbols["secondary_stiffness_N_per_m"]
+    assert labels["primary_damping_Ns_per_m"] == 4.9e4 == symbols["secondary_damping_Ns_per_m"]
+    assert labels["secondary_stiffness_N_per_m"] == 2.535e6 == symbols["primary_stiffness_N_per_m"]
+    assert labels["secondary_damping_Ns_per_m"] == 1.96e5 == symbols["primary_damping_Ns_per_m"]
+    default = values(load_quantities(data_path("partial-state-observer/parameters.toml")))
+    assert {k: default[k] for k in ev.SUSPENSION_KEYS} == labels       # parameters.toml = default
+    with pytest.raises(ValueError):
+        ev.suspension("swapped")
+
+
+def test_batched_simulators_match_single_runs():
+    p = ch.SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
+    ctx = ch._Context(p, "symbols")
+    t_s, q_in, fixed = ch.track_inputs(ctx, p, [4, 5], [60.0, 120.0], 310.0)
+    assert q_in.shape[:2] == (2, 2) and fixed.shape == (2,)
+    tr = ch.simulate_truths(ctx, p, q_in, t_s, [4, 5], [60.0, 120.0])
+    m = ctx.model
+    Phi, G0, G1 = foh(m.A, m.B, p["dt_s"])
+    for i in range(2):
+        for j in range(2):
+            x0 = -np.linalg.solve(m.A, m.B @ q_in[i, j, 0])
+            ref = simulate_foh(Phi, G0, G1, q_in[i, j], x0)[ctx.lead:]
+            np.testing.assert_allclose(tr["x"][i, j], ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+    est = ch.run_kalman(ctx, 120.0, tr, 1, p["initial_error_m"])
+    one = ch.record(tr, 1, 1)
+    rms = np.sqrt(np.mean(one["y_clean"] ** 2, axis=0))
+    kf = kb.steady_state_kalman(*ctx.kalman_model[120.0], np.diag(np.maximum(one["sigma"], 1e-6 * rms) ** 2))
+    q, dq = one["q_m"][0], (one["q_m"][1] - one["q_m"][0]) / t_s[1]
+    x0 = np.concatenate([one["x"][0], np.column_stack([q, dq]).ravel()])
+    x0[[12, 14, 16, 18]] += p["initial_error_m"]
+    x0[20::2] += p["initial_error_m"]
+    np.testing.assert_allclose(est[1], kf.run(one["y"], x0)[:, [12, 14, 16, 18]], rtol=1e-9, atol=1e-15)
+    hb0 = ch.monte_carlo_runs(ctx, p, tr, kalman=False)["hb0"]
+    np.testing.assert_allclose(hb0[0, 1], ctx.hb0_zoh.run(tr["y"][0, 1], None,
+                                                          tr["z_m"][0, 1, 0] + p["initial_error_m"]))
+
+
+@pytest.mark.parametrize("reading", ev.READINGS)
+def test_hb0_poles_at_primary_corner_in_both_readings(reading):
+    p = ch.SPEC.resolve({}, quick=True)
+    ctx = ch._Context(p, reading, kalman=False)
+    v = v10.load_parameters(**ev.suspension(reading))
+    np.testing.assert_allclose(ctx.hb0.poles.real,
+                               -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rtol=1e-5)

@@ -1,0 +1,324 @@
+"""Chapter rbpf-parameter-estimation: quick run within tolerances, validation, robustness."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import railpaper_cli
+
+from railpaper.data import read_toml
+
+from railpaper.paths import DATA_DIR
+from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
+from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.engine.rbpf import run_rbpf
+from railpaper.models import lateral_16state as L
+from railpaper.pipeline.claim_rules import is_untestable, rule_metrics
+
+PARAMS = ("csy", "lambda", "kpy", "ksy", "csaly")
+REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme",
+             "ekf_lateral_converged_of_10", "toy_ekf_diverged_init1", "toy_ekf_diverged_init2",
+             "toy_final_abs_error_max_rbpf_init1"]
+            + [f"{k}_{p}{s}" for p in PARAMS for s in ("", "_paper_scheme")
+               for k in ("steps_to_within_5pct", "final_relative_error")]
+            + [f"crlb_rel_350_{p}" for p in PARAMS])
+
+
+@pytest.fixture(scope="module")
+def quick_result():
+    params = chapter.SPEC.resolve({}, quick=True)
+    return params, chapter.run(quick=True, **params)
+
+
+def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
+    params, result = quick_result
+    metrics = check_metrics(result.metrics)
+    for key in REQUIRED:
+        assert key in metrics, key
+    claims = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "claims.toml")
+    for key, row in claims.items():                 # run() alone gives every metric a rule reads
+        for name in ([] if is_untestable(row) else rule_metrics(row)):
+            assert name in metrics, (key, name)
+    assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
+    tol = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "tolerances.toml")["quick"]
+    for key, band in tol.items():
+        if key.startswith("mc_"):           # the notebook's Monte Carlo sweep adds these
+            continue
+        assert band["min"] <= metrics[key] <= band["max"], (key, metrics[key], band)
+    ts = result.timeseries
+    assert list(ts.columns[:6]) == ["t_s"] + [f"{p}_norm" for p in PARAMS]
+    assert len(ts) == params["n_steps"] and math.isclose(ts.t_s.iloc[0], params["dt_s"])
+    toy = result.extra_tables["toy_timeseries"]
+    assert toy.columns[0] == "step" and len(toy) == params["toy_steps"]
+
+
+def test_toy_only_sample_is_one_record_of_the_main_run(quick_result):
+    """A toy sample (toy_seeds=1, lateral=False, seed s) is record s of the main run."""
+    params, result = quick_result
+    seed = params["seed"] + 3
+    sample = chapter.run(quick=True, **dict(params, seed=seed, toy_seeds=1, lateral=False))
+    assert sample.timeseries is None
+    assert not any(k.startswith(("critical_speed", "steps_to_within", "crlb", "ekf_lateral",
+                                 "lateral_")) for k in sample.metrics)
+    stats = result.toy.records
+    for ic in (1, 2):
+        row = stats[(stats.seed == seed) & (stats.init == ic)].iloc[0]
+        assert sample.metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] == row.rbpf_err_max
+        assert sample.metrics[f"toy_ekf_final_abs_error_max_init{ic}"] == row.ekf_err_max
+        assert sample.metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] == \
+            row.rbpf_working_err_max
+    assert sample.metrics["toy_ekf_converge_rate_init2"] == float(
+        stats[(stats.seed == seed) & (stats.init == 2)].ekf_converged.iloc[0])
+
+
+def test_monte_carlo_records_are_consecutive_seeds(quick_result):
+    """Records seed, seed + 1, ... (so seed batches k * 1000 are disjoint), each filtered from
+    both initial conditions; the lateral evidence counts n_records records."""
+    params, result = quick_result
+    stats = result.toy.records
+    seeds = list(range(params["seed"], params["seed"] + params["toy_seeds"]))
+    assert sorted(stats[stats.init == 1].seed) == seeds == sorted(stats[stats.init == 2].seed)
+    assert [run.seed for run in result.lateral.runs] == list(
+        range(params["seed"], params["seed"] + params["n_records"]))
+    assert len(result.lateral.runs) == \
+        params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"]
+    assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
+    assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
+    for name in ("toy_seeds", "n_records"):
+        with pytest.raises(ParameterError, match="< 1000"):
+            chapter.run(quick=True, **chapter.SPEC.resolve({name: 1000}, quick=True))
+
+
+def test_notebook_refuses_toy_only_run(tmp_path):
+    """lateral = false is for sweep samples: the notebook stops in its first cell, one line."""
+    result = railpaper_cli("run", "rbpf-parameter-estimation", "--quick", "-p", "lateral", "false",
+                           "--out", str(tmp_path / "out"))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "lateral = false is for Monte Carlo samples" in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_steps_to_within():
+    norm = np.array([[1.2, 1.0], [1.01, 1.1], [0.99, 1.0], [1.0, 1.2]])
+    np.testing.assert_array_equal(chapter.steps_to_within(norm), [2, -1])
+
+
+def test_non_physical_parameters_raise_one_line():
+    params = chapter.SPEC.resolve({"prior_low": 1.1}, quick=True)
+    with pytest.raises(ParameterError, match="prior_low"):
+        chapter.run(quick=True, **params)
+    params = chapter.SPEC.resolve({"spectrum": "nope"}, quick=True)
+    with pytest.raises(ParameterError, match="spectrum"):
+        chapter.run(quick=True, **params)
+
+
+def test_measurements_csv_validation(tmp_path):
+    params = chapter.SPEC.resolve({}, quick=True)
+    bad = tmp_path / "bad.csv"
+    pd.DataFrame({"t_s": np.arange(20) * 1e-3, "acc_w1_mps2": 0.0}).to_csv(bad, index=False)
+    with pytest.raises(ParameterError, match="missing column"):
+        chapter.read_measurements(str(bad), params)
+    good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in L.CHANNELS}})
+    good.to_csv(tmp_path / "step.csv", index=False)
+    with pytest.raises(ParameterError, match="dt_s"):
+        chapter.read_measurements(str(tmp_path / "step.csv"), params)
+    good["t_s"] = np.arange(20) * 1e-3
+    good.to_csv(tmp_path / "ok.csv", index=False)
+    rec = chapter.read_measurements(str(tmp_path / "ok.csv"), params)
+    assert rec.y.shape == (20, 5) and rec.u_mps is None and rec.seed is None
+
+
+def test_one_thread_restores_the_thread_counts():
+    import numba
+
+    from railpaper.experiments.rbpf_parameter_estimation.measurements import _openblas_handles, one_thread
+
+    before = numba.get_num_threads(), [get() for _, get in _openblas_handles()]
+    with one_thread():
+        assert numba.get_num_threads() == 1
+        assert all(get() == 1 for _, get in _openblas_handles())
+    assert (numba.get_num_threads(), [get() for _, get in _openblas_handles()]) == before
+
+
+def test_lateral_rbpf_survives_degenerate_weights():
+    fixed, theta = chapter.vehicle()
+    system = L.lateral_system(fixed, 300 / 3.6, 1e-3, 1e-12 * np.eye(16), 1e-6 * np.eye(5))
+    rng = np.random.default_rng(0)
+    y = np.full((30, 5), 1e6)                     # impossible data: every weight underflows
+    run = run_rbpf(system, y, theta * rng.uniform(0.5, 1.7, (20, 5)), np.zeros(16),
+                   1e-10 * np.eye(16), rng, u=np.zeros((30, 2)), scheme="paper")
+    assert np.all(np.isfinite(run.theta_mean)) and np.all(np.isfinite(run.x_mean))
+
+
+def _steps_by_loop(column, tol=0.05):
+    """First step (1-based) from which |x − 1| <= tol to the end, -1 if never: a written-out loop."""
+    for k in range(len(column)):
+        if all(abs(x - 1.0) <= tol for x in column[k:]):
+            return k + 1
+    return -1
+
+
+def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
+    """The named fields are what the pipeline writes and what the metrics were computed from:
+    the time series, the per-parameter steps (against a written-out loop), the EKF count and
+    guesses per record, and the illustrated record filtered by hand with the estimator."""
+    from railpaper.experiments.rbpf_parameter_estimation.measurements import one_thread
+
+    params, result = quick_result
+    lat, m = result.lateral, result.metrics
+    assert lat.stack("rbpf_paper_norm").shape == (params["n_records"], params["n_steps"], 5)
+    np.testing.assert_array_equal(result.timeseries.t_s, lat.t_s)
+    for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
+        norm = getattr(lat.illustrated, field)
+        cols = [f"{p}_norm{suffix}" for p in PARAMS]
+        np.testing.assert_array_equal(result.timeseries[cols].to_numpy(), norm)
+        for j, name in enumerate(PARAMS):
+            assert m[f"steps_to_within_5pct_{name}{suffix}"] == _steps_by_loop(norm[:, j])
+            assert m[f"final_relative_error_{name}{suffix}"] == norm[-1, j] - 1
+    ekf = lat.illustrated.ekf_norm
+    assert len(ekf) == params["ekf_guesses"] and all(len(r.ekf_norm) == 1 for r in lat.runs[1:])
+    within = [bool(np.all(np.abs(r[-1] - 1) <= 0.05)) for r in ekf]
+    assert lat.ekf_converged_count == sum(within) == m["ekf_lateral_converged_count"]
+    assert list(lat.crlb.parameter) == list(PARAMS)
+    np.testing.assert_array_equal(lat.crlb.known_350, [m[f"crlb_rel_350_{p}"] for p in PARAMS])
+    fixed, theta = chapter.vehicle()
+    np.testing.assert_array_equal(lat.theta_true, theta)
+    with one_thread():                                  # the run's thread settings
+        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
+        Q, R = chapter.filter_noise(fixed, theta, params, record.du_var_m2ps2)
+        rng = np.random.default_rng([params["seed"], 11])   # documented: prior, then the filter
+        theta0 = theta * rng.uniform(params["prior_low"], params["prior_high"], (200, 5))
+        run = run_rbpf(L.lateral_system(fixed, params["speed_kmh"] / 3.6, params["dt_s"], Q, R),
+                       record.y, theta0, np.zeros(16), 1e-10 * np.eye(16), rng, u=record.u_mps,
+                       scheme="paper", delta=params["paper_delta"])
+    np.testing.assert_array_equal(run.theta_mean / theta, lat.illustrated.rbpf_paper_norm)
+
+
+def test_user_record_input_is_held_one_step(tmp_path):
+    """u_k is the track velocity of row k − 1 (row 0 repeated); the process noise is the
+    variance of its changes (numpy by hand)."""
+    params = chapter.SPEC.resolve({}, quick=True)
+    t = np.arange(30) * 1e-3
+    u1, u2 = np.sin(40 * t), np.cos(25 * t)
+    frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in L.CHANNELS}, "ydot_t1_mps": u1,
+                          "ydot_t2_mps": u2})
+    frame.to_csv(tmp_path / "u.csv", index=False)
+    rec = chapter.read_measurements(str(tmp_path / "u.csv"), params)
+    np.testing.assert_array_equal(rec.u_mps[1:], np.column_stack([u1, u2])[:-1])
+    np.testing.assert_array_equal(rec.u_mps[0], [u1[0], u2[0]])
+    np.testing.assert_allclose(rec.du_var_m2ps2, [np.var(np.diff(u1)), np.var(np.diff(u2))],
+                               rtol=1e-12)
+
+
+def test_page_structure(quick_result):
+    """Issue 14's page from the notebook source: title = SPEC.title, claims glued once at the
+    top, rules in the claims section at the end, every figure numbered and referenced, every
+    glued name glued, plumbing hidden, short visible cells, no developer words."""
+    import json
+    import re
+
+    from railpaper.experiments.rbpf_parameter_estimation.tables import caption_values
+    from railpaper.paths import BOOK_DIR
+
+    cells = json.loads((BOOK_DIR / "notebooks" / chapter.SPEC.notebook).read_text())["cells"]
+    src = ["".join(c["source"]) for c in cells]
+    tags = [set(c.get("metadata", {}).get("tags", [])) for c in cells]
+    text = "".join(s for s, c in zip(src, cells) if c["cell_type"] == "markdown")
+    assert src[0].splitlines()[0] == f"# {chapter.SPEC.title}"
+    assert text.count("{glue:md} claims_table") == 1 == "".join(src[:6]).count("claims_table")
+    label = next(i for i, s in enumerate(src) if "(claims-rbpf-parameter-estimation)=" in s)
+    assert label > len(cells) // 2 and "chapter_rules(CHAPTER)" in src[label + 1]
+    for word in ("paper 003", "claims.toml", "railpaper.pipeline", "shared/papers", "data/",
+                 "…", "errata.csv", "parameters.toml"):
+        assert word not in text, word
+    names = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-rbpf-[\w-]+)", text)
+    assert len(names) == 9 and len({n for _, n in names}) == 9
+    for png, name in names:
+        assert f"{{numref}}`{name}`" in text
+        assert f'save_figure(fig, out_dir, "{png}")' in "".join(src)
+    assert not re.search(r"(figure|plot)s? (above|below)", text)
+    glued = set(re.findall(r"\{glue:md\}`(\w+)`", text))     # every inline name is glued
+    assert len(glued) > 15 and glued <= set(caption_values(quick_result[1], quick_result[0]))
+    hidden = {"remove-cell", "remove-input", "hide-input", "parameters"}
+    visible = [s for s, t, c in zip(src, tags, cells)
+               if c["cell_type"] == "code" and not t & hidden]
+    assert len(visible) >= 7
+    for s, t, c in zip(src, tags, cells):
+        if c["cell_type"] != "code" or "parameters" in t:
+            continue
+        assert "result.data" not in s and len(s.splitlines()) <= 25, s
+        if re.search(r"save_figure\(|write_outputs\(|glue\(", s):
+            assert {"remove-input", "remove-cell"} & t, s
+    for s in visible:
+        assert max(map(len, s.splitlines())) <= 72, s
+        for name in ("overrides", "out_dir", "quick"):
+            assert not re.search(rf"\b{name}\b", s), (name, s)
+
+
+def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_result):
+    """The run's lateral posterior is IBIS called directly with the documented arguments (box
+    prior_low..prior_high x theta, x0 = 0, P0 = 1e-10 I, generator [seed, 17]); its sd sits on
+    the Cramer-Rao bound (Fisher information of the Kalman likelihood, an independent
+    computation: Bernstein-von Mises, flat prior) within the sampler's error, and the RBPF's
+    stored spreads are run_rbpf's theta_std."""
+    from railpaper.engine.ibis import run_ibis
+    from railpaper.experiments.rbpf_parameter_estimation.measurements import one_thread
+
+    params, result = quick_result
+    lat = result.lateral
+    fixed, theta = chapter.vehicle()
+    with one_thread():
+        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
+        system = chapter.filter_system(params, fixed, theta, record)
+        run = run_ibis(system, record.y, params["prior_low"] * theta,
+                       params["prior_high"] * theta, np.zeros(16), 1e-10 * np.eye(16),
+                       np.random.default_rng([params["seed"], 17]), u=record.u_mps,
+                       n_particles=params["ibis_particles"], proposal="independent")
+        paper = chapter.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
+    post = lat.illustrated.posterior
+    np.testing.assert_array_equal(post.mean, run.mean / theta)
+    np.testing.assert_array_equal(post.q95, run.q95 / theta)
+    np.testing.assert_array_equal(lat.illustrated.rbpf_paper_sd_norm, paper.theta_std / theta)
+    crlb = lat.crlb.set_index("parameter")
+    for k, col in ((350, "known_350"), (params["n_steps"], f"known_{params['n_steps']}")):
+        ratio = post.sd[k - 1] / crlb[col].to_numpy()
+        assert np.all((ratio > 0.7) & (ratio < 1.4)), (k, ratio)
+    assert sum(r.posterior is not None for r in lat.runs) == min(params["ibis_records"],
+                                                                 params["n_records"])
+
+
+def test_lateral_posterior_metrics_count_by_hand(quick_result):
+    """Coverage, the posterior's 5 %-from-350 rate and the sd medians, counted by loops over
+    the typed result, with scipy's exact binomial interval."""
+    from scipy.stats import binomtest
+
+    params, result = quick_result
+    m, runs = result.metrics, [r for r in result.lateral.runs if r.posterior is not None]
+    z = 1.6448536269514722
+    counts = {"working": 0, "paper_scheme": 0, "tempered": 0}
+    within = 0
+    for r in runs:
+        p = r.posterior
+        for j in range(5):
+            counts["working"] += p.q05[-1, j] <= 1.0 <= p.q95[-1, j]
+            counts["paper_scheme"] += abs(r.rbpf_paper_norm[-1, j] - 1) <= z * \
+                r.rbpf_paper_sd_norm[-1, j]
+            counts["tempered"] += abs(r.rbpf_working_norm[-1, j] - 1) <= z * \
+                r.rbpf_working_sd_norm[-1, j]
+        within += all(abs(p.mean[k, j] - 1) <= 0.05 for k in range(349, len(p.mean))
+                      for j in range(5))
+    n = 5 * len(runs)
+    for name, k in counts.items():
+        key = f"coverage_90_{name}_lateral"
+        ci = binomtest(int(k), n).proportion_ci(0.95, method="exact")
+        assert (m[key], m[key + "_n"]) == (k / n, n)
+        assert (m[key + "_low"], m[key + "_high"]) == pytest.approx((ci.low, ci.high), abs=1e-9)
+    assert m["lateral_within_5pct_from_350_rate_posterior"] == within / len(runs)
+    sd350 = np.array([r.posterior.sd[349] for r in runs])
+    assert m["posterior_sd_rel_350_max"] == pytest.approx(np.median(sd350.max(axis=1)))
+    for j, name in enumerate(PARAMS):
+        assert m[f"posterior_sd_rel_350_{name}"] == runs[0].posterior.sd[349, j]
+        assert m[f"posterior_sd_rel_350_median_{name}"] == pytest.approx(np.median(sd350[:, j]))

@@ -1,0 +1,115 @@
+"""Lateral 16-state model (paper 003, Eqs. 1-9) and the Kalman-likelihood CRLB."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from scipy.linalg import expm
+
+from railpaper.data import load_quantities
+
+from railpaper.paths import DATA_DIR
+from railpaper.discretise import zoh
+from railpaper.engine.crlb import crlb_std, fisher_information
+from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.rbpf import run_rbpf
+from railpaper.models import lateral_16state as L
+
+PARAMS = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
+FIXED = {k: PARAMS[k].value for k in L.FIXED_KEYS}
+THETA = np.array([PARAMS[k].value for k in L.PARAM_NAMES])
+V = 300 / 3.6
+
+
+def test_affine_equals_direct_build():
+    A0, Ak = L.affine_terms(FIXED, V)
+    rng = np.random.default_rng(0)
+    thetas = THETA * rng.uniform(0.3, 2.0, (6, 5))
+    affine = L.a_of_theta(A0, Ak, thetas)
+    for t, A in zip(thetas, affine):
+        np.testing.assert_allclose(A, L.build_A_direct(FIXED, t, V), rtol=1e-9, atol=1e-9)
+
+
+def test_equations_by_hand():
+    A = L.build_A_direct(FIXED, THETA, V)
+    csy, lam, kpy, ksy, csaly = THETA
+    # Eq. (2): yaw of the front wheelset, coefficient of d1
+    assert A[2, 14] == pytest.approx(-2 * FIXED["f11"] * lam * FIXED["l0"] / FIXED["r0"]
+                                     / FIXED["iwz"])
+    # Eq. (7): body lateral
+    assert A[12, 9] == pytest.approx(ksy / FIXED["mbd"])
+    # Eq. (6): yaw damping
+    assert A[10, 10] == pytest.approx(-csaly * FIXED["lbw"] ** 2 / FIXED["ib"])
+    # structural zeros: exactly two eigenvalues at 0 (d_j - yw_j constant)
+    ev = np.linalg.eigvals(A)
+    assert np.sum(np.abs(ev) < 1e-6) == 2
+
+
+def test_zoh_matches_scipy_and_stable_at_300():
+    A = L.build_A_direct(FIXED, THETA, V)
+    B = L.input_matrix()
+    F, G = zoh(A, B, 1e-3)
+    M = np.zeros((18, 18))
+    M[:16, :16], M[:16, 16:] = A, B
+    E = expm(M * 1e-3)
+    np.testing.assert_allclose(F, E[:16, :16], atol=1e-13)
+    np.testing.assert_allclose(G, E[:16, 16:], atol=1e-13)
+    assert L.least_damped(A)[0] < 0
+
+
+def test_rbpf_at_truth_equals_filterpy_kalman():
+    """Parameters fixed at the truth, no move: every particle's KF equals filterpy's KF."""
+    rng = np.random.default_rng(1)
+    Q = 1e-10 * np.eye(16)
+    R = np.diag([0.1, 0.1, 0.1, 0.01, 0.001]) ** 2
+    system = L.lateral_system(FIXED, V, 1e-3, Q, R)
+    s = system(THETA[None])
+    K = 60
+    u = rng.standard_normal((K, 2)) * 0.04
+    x = np.zeros(16)
+    y = np.zeros((K, 5))
+    for k in range(K):
+        x = s.F[0] @ x + s.B[0] @ u[k]
+        y[k] = s.H[0] @ x + rng.standard_normal(5) * np.sqrt(np.diag(R))
+    run = run_rbpf(system, y, np.repeat(THETA[None], 3, axis=0), np.zeros(16), 1e-8 * np.eye(16),
+                   np.random.default_rng(2), u=u, scheme="paper", move=False)
+    kf = KalmanFilter(dim_x=16, dim_z=5, dim_u=2)
+    kf.x, kf.P, kf.F, kf.B, kf.H, kf.Q, kf.R = (np.zeros((16, 1)), 1e-8 * np.eye(16), s.F[0],
+                                               s.B[0], s.H[0], Q, R)
+    for k in range(K):
+        kf.predict(u=u[k][:, None])
+        kf.update(y[k][:, None])
+        np.testing.assert_allclose(run.x_mean[k], kf.x[:, 0], rtol=1e-10, atol=1e-10)
+
+
+def test_crlb_matches_closed_form_ar1():
+    """AR(1) x_k = a x_{k-1} + w observed almost exactly: I(a) = Σ y_{k-1}² / q."""
+    a, q, K = 0.7, 0.5, 2000
+    rng = np.random.default_rng(4)
+    x = np.zeros(K + 1)
+    for k in range(K):
+        x[k + 1] = a * x[k] + np.sqrt(q) * rng.standard_normal()
+    y = x[1:, None]
+
+    def system(theta):
+        return LinearGaussianBatch(np.atleast_2d(theta)[:, :, None], np.array([[q]]),
+                                   np.array([[1.0]]), np.array([[1e-10]]))
+
+    info = fisher_information(system, np.array([a]), y, np.zeros(1), np.array([[1e-10]]))[K]
+    closed = np.sum(x[:K] ** 2) / q           # x_0 = 0 enters with weight 0
+    assert info[0, 0] == pytest.approx(closed, rel=1e-4)
+    assert crlb_std(info)[0] == pytest.approx(1 / np.sqrt(closed), rel=1e-4)
+
+
+def test_ekf_model_derivatives_match_finite_differences():
+    model = L.ekf_model(FIXED, V, 1e-3)
+    F, G, H, dF, dG, dH = model(THETA)
+    for k in (0, 2, 4):
+        h = 1e-6 * THETA[k]
+        tp, tm = THETA.copy(), THETA.copy()
+        tp[k] += h
+        tm[k] -= h
+        Fp, Gp, Hp, *_ = model(tp)
+        Fm, Gm, Hm, *_ = model(tm)
+        np.testing.assert_allclose(dF[k], (Fp - Fm) / (2 * h), rtol=1e-4, atol=1e-10)
+        np.testing.assert_allclose(dG[k], (Gp - Gm) / (2 * h), rtol=1e-4, atol=1e-12)
+        np.testing.assert_allclose(dH[k], (Hp - Hm) / (2 * h), rtol=1e-5, atol=1e-9)

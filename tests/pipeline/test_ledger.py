@@ -1,0 +1,278 @@
+"""The claims ledger on hand-made claims and metrics: verdict vocabulary, readings, missing
+metrics, non-default runs, the shared chapter table and the CSV."""
+
+import csv
+import json
+import re
+
+import pytest
+
+from railpaper.data import DataError, read_toml
+from railpaper.pipeline.chapters import book_chapters
+from railpaper.pipeline.outputs import chapter_data_dir
+from railpaper.pipeline.ledger import (CSV_COLUMNS, VERDICTS, LedgerRow, build_ledger,
+                                       chapter_rows, chapter_table, judge, ledger_counts,
+                                       ledger_markdown, write_ledger_csv)
+
+CLAIMS_TOML = """
+[fast]
+claim = "converges in about 0.15 s"
+source = "toy paper, p. 1"
+rule = "reproduced if the median is within 0.05 s of 0.15 s"
+paper_value = 0.15
+unit = "s"
+primary = "t_med"
+interval = ["t_low", "t_high"]
+n_samples = "t_n"
+statistic = "median over seeds"
+[[fast.cases]]
+verdict = "reproduced"
+reason = "t = {t_med:.2f} s"
+when = [{test = "within_abs", metrics = ["t_med"], tolerance = 0.05}]
+[[fast.cases]]
+verdict = "artefact"
+reason = "only the slow variant: {t_slow:.2f} s"
+when = [{test = "within_abs", metrics = ["t_slow"], tolerance = 0.05}]
+[fast.otherwise]
+reason = "t = {t_med:.2f} s"
+
+[trend]
+claim = "error grows with speed"
+source = "toy paper, p. 2"
+rule = "reproduced if the rho interval lies above 0"
+primary = "rho"
+n_samples = "rho_n"
+[[trend.cases]]
+verdict = "reproduced"
+reason = "grows"
+when = [{test = "range", metrics = ["rho_low"], above = 0}]
+
+[trend_printed]
+claim = "error grows with speed"
+group = "trend"
+reading = "as printed"
+source = "toy paper, p. 2"
+rule = "same, on the printed equation"
+primary = "rho_printed"
+deterministic = true
+[[trend_printed.cases]]
+verdict = "reproduced"
+reason = "grows"
+when = [{test = "range", metrics = ["rho_printed"], above = 0}]
+
+[timing]
+claim = "56 % faster"
+source = "toy paper, p. 4"
+rule = "ratio below 0.6"
+paper_value = 56
+unit = "%"
+primary = "ratio"
+n_samples = "ratio_n"
+[[timing.cases]]
+verdict = "reproduced"
+reason = "ratio {ratio:.2f}"
+when = [{test = "range", metrics = ["ratio"], below = 0.6}]
+
+[lost]
+claim = "agrees with line data"
+source = "toy paper, p. 5"
+[lost.otherwise]
+verdict = "not testable"
+reason = "the line data are not published"
+"""
+
+DEFAULTS = {"seed": 0, "speeds_kmh": [60.0, 160.0]}
+
+
+@pytest.fixture
+def toy(tmp_path):
+    """A chapter 'toy' with claims in tmp_path/data and a run in tmp_path/chapters."""
+    (tmp_path / "data" / "toy").mkdir(parents=True)
+    (tmp_path / "data" / "toy" / "claims.toml").write_text(CLAIMS_TOML)
+    (tmp_path / "chapters" / "toy").mkdir(parents=True)
+
+    def write_run(metrics, parameters=DEFAULTS, timings=None):
+        out = tmp_path / "chapters" / "toy"
+        run = {"chapter": "toy", "parameters": parameters, "quick": True, "metrics": metrics}
+        (out / "metrics.json").write_text(json.dumps(run))
+        if timings is not None:
+            (out / "timings.json").write_text(json.dumps({"metrics": timings}))
+        rows = build_ledger(["toy"], tmp_path / "chapters", tmp_path / "data")
+        return {r.key: r for r in rows}
+    return write_run
+
+
+GOOD = {"t_med": 0.12, "t_low": 0.1, "t_high": 0.13, "t_n": 20, "t_slow": 0.5,
+        "rho": 0.8, "rho_low": 0.2, "rho_n": 20, "rho_printed": 0.5, "ratio_n": 5}
+
+
+def test_every_rule_and_vocabulary(toy):
+    rows = toy(GOOD, timings={"ratio": 0.44})
+    assert {k: r.verdict for k, r in rows.items()} == dict(
+        dict.fromkeys(rows, "reproduced"), lost="not testable")
+    assert rows["fast"].reason == "t = 0.12 s"
+    assert rows["fast"].paper == "0.15 s" and rows["fast"].ours == "0.12 [0.1, 0.13] s, n = 20"
+    assert (rows["fast"].ours_low, rows["fast"].ours_high, rows["fast"].n_samples) == (0.1, 0.13, 20)
+    assert rows["timing"].reason == "ratio 0.44"   # looked up in timings.json
+    assert rows["trend"].paper == "(no number)"
+    assert rows["trend_printed"].group == "trend" and rows["trend_printed"].reading == "as printed"
+    assert rows["lost"].reason == "the line data are not published"
+
+
+@pytest.mark.parametrize("change, key, verdict, reason", [
+    ({"t_med": 0.2001}, "fast", "differs", "t = 0.20 s"),          # just outside ±0.05
+    ({"t_med": 0.21, "t_slow": 0.16}, "fast", "artefact", "only the slow variant: 0.16 s"),
+    ({"rho_low": 0.0}, "trend", "differs", ""),                     # 'above' is strict
+])
+def test_rule_outcomes(toy, change, key, verdict, reason):
+    rows = toy(dict(GOOD, **change), timings={"ratio": 0.44})
+    assert (rows[key].verdict, rows[key].reason) == (verdict, reason)
+    assert all(r.verdict in ("reproduced", "not testable") for k, r in rows.items() if k != key)
+
+
+def test_missing_metric_and_missing_run(toy, tmp_path):
+    rows = toy({k: v for k, v in GOOD.items() if k != "t_slow"}, timings={})
+    assert rows["fast"].verdict == "missing" and "t_slow" in rows["fast"].reason
+    assert rows["timing"].verdict == "missing" and rows["timing"].ours == "-"
+    assert rows["trend"].verdict == "reproduced"
+    rows = chapter_rows("toy", read_toml(tmp_path / "data/toy/claims.toml"), None)
+    assert {r.verdict for r in rows} == {"missing"}
+
+
+def test_non_default_parameters_noted_and_judged(monkeypatch, tmp_path):
+    from railpaper.pipeline import ledger
+    chapter = book_chapters()[0]
+    defaults = ledger.chapter_spec(chapter).resolve({}, True)
+    run = {"parameters": dict(defaults, seed=7), "quick": True}
+    assert ledger.non_default_note(chapter, run).startswith("Non-default parameters: seed.")
+    assert ledger.non_default_note(chapter, {"parameters": defaults, "quick": True}) == ""
+
+
+def test_rows_need_a_documented_rule():
+    bare = {"bare": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "cases": [
+        {"verdict": "reproduced", "reason": "", "when": []}]}}
+    with pytest.raises(DataError, match="needs 'n_samples'"):
+        chapter_rows("toy", bare, {"metrics": {"a": 1}})
+    norule = {"x": {"claim": "x", "source": "p", "primary": "a", "deterministic": True,
+                    "cases": [{"verdict": "reproduced", "reason": ""}]}}
+    with pytest.raises(DataError, match="needs 'rule'"):
+        chapter_rows("toy", norule, {"metrics": {"a": 1}})
+    badverdict = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a",
+                        "deterministic": True, "cases": [{"verdict": "reproduced*", "reason": ""}]}}
+    with pytest.raises(DataError, match="verdict in reproduced, artefact, differs, undecided, not"):
+        chapter_rows("toy", badverdict, {"metrics": {"a": 1}})
+    badtest = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "deterministic": True,
+                     "cases": [{"verdict": "reproduced", "reason": "",
+                                "when": [{"test": "close_to", "metrics": ["a"]}]}]}}
+    with pytest.raises(DataError, match="unknown test 'close_to'"):
+        chapter_rows("toy", badtest, {"metrics": {"a": 1}})
+
+
+def test_equals_reference_metric_and_non_strict_increasing():
+    claim = {"paper_value": True, "primary": "a", "deterministic": True, "cases": [
+        {"verdict": "reproduced", "reason": "eq", "when": [{"test": "equals", "metrics": ["flag"]}]},
+        {"verdict": "reproduced", "reason": "near b",
+         "when": [{"test": "within_factor", "metrics": ["a"], "reference": "b", "factor": 2}]},
+        {"verdict": "differs", "reason": "ordered",
+         "when": [{"test": "increasing", "metrics": ["a", "b"], "strict": False}]}]}
+    assert judge(claim, {"flag": True, "a": 1.0, "b": 9.0}) == ("reproduced", "eq")
+    assert judge(claim, {"flag": False, "a": 5.0, "b": 9.0}) == ("reproduced", "near b")
+    assert judge(claim, {"flag": False, "a": 4.0, "b": 9.0}) == ("differs", "ordered")
+    assert judge(claim, {"flag": False, "a": 9.0, "b": 9.0}) == ("reproduced", "near b")
+    assert judge(claim, {"flag": False, "a": 90.0, "b": 9.0}) == ("differs", "")
+
+
+def test_markdown_counts_badges_and_chapter_table_shared(toy):
+    rows = list(toy(dict(GOOD, rho_low=-0.1), timings={"ratio": 0.44}).values())
+    text = ledger_markdown(rows, {"toy": "Toy chapter"})
+    assert text.startswith("5 claims and readings: 3 reproduced, 1 differs, 1 not testable.")
+    assert "**{ref}`Toy chapter <claims-toy>`** — 3 reproduced, 1 differs, 1 not testable" in text
+    assert chapter_table(rows) in text                 # the chapter renders the very same table
+    assert text.count('<span class="verdict verdict-reproduced">') == 3
+    assert '<span class="verdict verdict-not-testable">∅ not testable</span>' in text
+    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 1, 0, 1, 0)))
+
+
+def test_markdown_escapes_table_breakers():
+    row = LedgerRow("toy", "k", "a | b", "s", "$1", "2", "differs", "x | y")
+    line = chapter_table([row]).splitlines()[-1]
+    assert len(re.findall(r"(?<!\\)\|", line)) == 6     # five columns, pipes inside escaped
+    assert "a \\| b" in line and "x \\| y" in line and "\\$1" in line
+
+
+def test_ledger_csv_columns_and_numbers(toy, tmp_path):
+    rows = list(toy(GOOD, timings={"ratio": 0.44}).values())
+    path = write_ledger_csv(rows, tmp_path / "ledger.csv")
+    with path.open() as handle:
+        table = list(csv.DictReader(handle))
+    assert list(table[0]) == CSV_COLUMNS and len(table) == 5
+    fast = table[0]
+    assert (fast["claim"], fast["reading"], fast["verdict"]) == (
+        "converges in about 0.15 s", "as stated", "reproduced")
+    assert float(fast["ours"]) == 0.12 and float(fast["ours_high"]) == 0.13
+    assert int(fast["n_samples"]) == 20 and float(fast["paper_value"]) == 0.15
+    assert table[4]["verdict"] == "not testable" and table[4]["ours"] == ""
+
+
+@pytest.mark.parametrize("chapter", book_chapters())
+def test_repository_claims_all_have_rules(chapter):
+    """Every row of the four chapters can be judged (a run without metrics: 'missing')."""
+    claims = read_toml(chapter_data_dir(chapter) / "claims.toml")
+    rows = chapter_rows(chapter, claims, {"metrics": {}, "parameters": {}, "quick": True})
+    assert len(rows) == len(claims)
+    assert {r.verdict for r in rows} <= {"missing", "not testable", "undecided"}
+    for row in claims.values():
+        assert row.get("justification") or row.get("otherwise", {}).get("verdict") == "not testable"
+
+
+def test_toc_numbers_chapters_and_lists_appendix_pages_that_exist(tmp_path):
+    import yaml
+
+    from railpaper.pipeline.book import write_toc
+    (tmp_path / "reproducibility.md").write_text("# R\n")
+    chapters = book_chapters()
+    toc = yaml.safe_load(write_toc(tmp_path, chapters).read_text())
+    main, appendix = toc["parts"]
+    assert main["numbered"] is True and "numbered" not in appendix
+    assert [c["file"].split("/")[1] for c in main["chapters"]] == chapters
+    assert appendix["chapters"] == [{"file": "reproducibility"}]
+    (tmp_path / "performance.md").write_text("# P\n")
+    toc = yaml.safe_load(write_toc(tmp_path, chapters).read_text())
+    assert toc["parts"][1]["chapters"] == [{"file": "reproducibility"}, {"file": "performance"}]
+
+
+def test_environment_table_matches_the_installed_packages(tmp_path):
+    """The generated table holds the lock's pins; the venv built from the lock has them installed."""
+    from importlib.metadata import version
+
+    from railpaper.pipeline.book import KEY_PACKAGES, locked_versions, write_environment
+
+    from railpaper.paths import REPO_DIR
+    pins = locked_versions(REPO_DIR / "environment.lock")
+    text = write_environment(tmp_path).read_text()
+    for name in KEY_PACKAGES:
+        assert f"| {name} | {pins[name]} |" in text
+        assert version(name) == pins[name], name
+    assert "| python | 3.11 " in text
+
+
+@pytest.mark.parametrize("chapter", ["reduced-order-observer", "partial-state-observer",
+                                     "rbpf-parameter-estimation", "quasi-gaussian-rbpf"])
+def test_chapter_rules_gives_each_rule_and_reason_once_and_every_reading(chapter):
+    from railpaper.pipeline.ledger import chapter_rules
+    from railpaper.pipeline.outputs import claims
+    text = chapter_rules(chapter)
+    rows = claims(chapter).values()
+    for row in rows:
+        if row.get("reading"):
+            assert f"reading: {row['reading']}" in text
+        lines = text.splitlines()
+        if row.get("justification"):
+            j = " ".join(row["justification"].split("\n"))
+            assert sum(line.endswith(f"*Why:* {j}") for line in lines) == 1, row["claim"]
+        if row.get("rule"):
+            r = " ".join(row["rule"].split("\n"))
+            assert sum(f": {r} *" in line or line.endswith(f": {r}") for line in lines) == 1, r
+    # every claim heads exactly one item
+    for claim in {row["claim"] for row in rows}:
+        assert text.count(f"**{claim}**") >= 1
