@@ -22,7 +22,6 @@ from typing import Any, Iterable, Mapping
 
 from railpaper.paths import DATA_DIR
 
-
 #: Units whose values must be strictly positive (mass, inertia, stiffness, damping, speed,
 #: length, time, frequency, force, spectral constants).
 POSITIVE_UNITS = frozenset({

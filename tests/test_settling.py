@@ -1,7 +1,8 @@
 """The settling definition shared by every chapter's convergence metric, against a brute force."""
 
 import numpy as np
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 from railpaper.settling import settled_index
 

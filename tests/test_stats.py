@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from railpaper.stats import mean_interval, median_interval, paired_trend, proportion_interval
+from railpaper.stats import (
+    mean_interval,
+    median_interval,
+    paired_trend,
+    proportion_interval,
+)
 
 
 @pytest.mark.parametrize("n", [6, 9, 10, 20, 21, 50])

@@ -20,9 +20,13 @@ from filterpy.kalman import KalmanFilter
 from scipy.linalg import expm
 
 from railpaper.engine.kalman import LOG_2PI
-from railpaper.engine.particles import (effective_sample_size, liu_west_move,
-                                            normalise_log_weights, systematic_resample,
-                                            weighted_mean_cov)
+from railpaper.engine.particles import (
+    effective_sample_size,
+    liu_west_move,
+    normalise_log_weights,
+    systematic_resample,
+    weighted_mean_cov,
+)
 from railpaper.engine.rbpf import mixture_moments
 
 

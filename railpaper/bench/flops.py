@@ -22,9 +22,9 @@ import time
 import numpy as np
 
 from railpaper.engine.kalman_bank import multiply_adds as bank_multiply_adds
-from railpaper.models import lateral_16state as L
 from railpaper.engine.sparse_zoh import multiply_adds as zoh_multiply_adds
 from railpaper.engine.sparse_zoh import term_counts
+from railpaper.models import lateral_16state as L
 
 NOMINAL_FLOP_PER_CYCLE = 32      # per core, double: two 512-bit FMA units (8 lanes x 2 FLOP x 2)
 

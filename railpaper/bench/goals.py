@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from railpaper.bench.verdict import WITHHELD, is_ratio, ratio_verdict
 
-
 #: The engine issue's goals at N = 1000 on the benchmark machine: (label, payload key, sense,
 #: target).  ">=": the measured median must reach the target; "<=": must not exceed it.
 GOALS = (

@@ -29,16 +29,17 @@ import numpy as np
 
 from railpaper.bench.filterpy_rbpf import FilterpyRBPF
 from railpaper.bench.flops import step_budget
-from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 from railpaper.discretise import zoh
+from railpaper.engine import rbpf as rbpf_module
+from railpaper.engine.ibis import run_ibis
+from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF
 from railpaper.engine.rbpf import RaoBlackwellisedPF
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
-from railpaper.models import lateral_16state as L
-from railpaper.engine.ibis import run_ibis
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.posterior import PROPOSAL
-from railpaper.engine import rbpf as rbpf_module
+from railpaper.models import lateral_16state as L
+from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 
 REPEATS = 5                    # alternations of every interleaved comparison
 FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
@@ -48,9 +49,9 @@ MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
     """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model."""
     p = dict(E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False))
-    fixed, theta = E.vehicle()
-    data = E.simulate_lateral(p, fixed, theta, seed)
-    Q, R = E.filter_noise(fixed, theta, p, data.du_var_m2ps2)
+    fixed, theta = study.vehicle()
+    data = study.simulate_lateral(p, fixed, theta, seed)
+    Q, R = study.filter_noise(fixed, theta, p, data.du_var_m2ps2)
     v = p["speed_kmh"] / 3.6
     A0, Ak = L.affine_terms(fixed, v)
     fast = L.lateral_system(fixed, v, p["dt_s"], Q, R,

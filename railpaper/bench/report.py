@@ -17,6 +17,7 @@ from railpaper.bench import rbpf_engine as engine
 from railpaper.bench.goals import flops_line, goal_cells, goal_rows, goals_markdown
 from railpaper.bench.verdict import WITHHELD, is_ratio, other_work, ratio_verdict
 
+
 class BenchError(ValueError):
     """Bad input to the bench (one line; the CLI exits 2 on it as on every ValueError)."""
 

@@ -25,8 +25,9 @@ import time
 import numpy as np
 
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
-from railpaper.experiments.rbpf_parameter_estimation import evidence as mc
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.toy import gaussian_covers
+from railpaper.stats import rate
 
 #: (ess_fraction, tempering_steps); the first is the chapter's default.
 SETTINGS = ((None, None), (0.5, None), (0.3, None), (None, 100), (0.5, 100))
@@ -38,13 +39,13 @@ def run_setting(records: list, p: dict, fixed: dict, theta: np.ndarray) -> dict:
     resamplings, seconds, within, covers = [], [], [], []
     for seed, (record, system) in enumerate(records):
         t0 = time.perf_counter()
-        run = E.lateral_rbpf(p, system, record, theta, seed, "working")
+        run = study.lateral_rbpf(p, system, record, theta, seed, "working")
         seconds.append((time.perf_counter() - t0) / len(record.y))
         resamplings.append(int(run.resampled.sum()))
         rel = run.theta_mean / theta - 1.0
         within.append(bool(np.all(np.abs(rel[START - 1:]) <= WITHIN)))
         covers.append(gaussian_covers(run.theta_mean[-1] / theta, run.theta_std[-1] / theta, 1.0))
-    w, c = mc.rate(within), mc.rate(np.array(covers))
+    w, c = rate(within), rate(np.array(covers))
     return dict(resamplings=float(np.median(resamplings)),
                 steps_per_s=1.0 / float(np.median(seconds)),
                 within=(w.value, w.low, w.high), coverage=(c.value, c.low, c.high))
@@ -52,11 +53,11 @@ def run_setting(records: list, p: dict, fixed: dict, theta: np.ndarray) -> dict:
 
 def main(n_records: int = 10) -> list[dict]:
     base = dict(E.SPEC.resolve({}, False))
-    fixed, theta = E.vehicle()
+    fixed, theta = study.vehicle()
     records = []
     for seed in range(n_records):
-        record = E.simulate_lateral(base, fixed, theta, seed)
-        records.append((record, E.filter_system(base, fixed, theta, record)))
+        record = study.simulate_lateral(base, fixed, theta, seed)
+        records.append((record, study.filter_system(base, fixed, theta, record)))
     rows = []
     for ess, temper in SETTINGS:
         p = dict(base)

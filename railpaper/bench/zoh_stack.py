@@ -23,11 +23,11 @@ import time
 import numba
 import numpy as np
 
-from railpaper.timing import LoadLog, interleaved, paired_ratio, summary
 from railpaper.engine.batch_expm import zoh_stack
-from railpaper.models import lateral_16state as L
 from railpaper.engine.sparse_zoh import BLOCK, multiply_adds, term_counts, zoh_sparse
-from railpaper.experiments.rbpf_parameter_estimation.experiment import vehicle
+from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
+from railpaper.models import lateral_16state as L
+from railpaper.timing import LoadLog, interleaved, paired_ratio, summary
 
 CALLS = 15
 DENSE_MULTIPLY_ADDS = 6 * 18 ** 3   # expm_stack: 5 products (Paterson–Stockmeyer) + 1 squaring

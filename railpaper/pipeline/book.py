@@ -11,7 +11,12 @@ from pathlib import Path
 
 from railpaper.bench.report import write_performance
 from railpaper.paths import BOOK_DIR, REPO_DIR
-from railpaper.pipeline.chapters import PipelineError, book_chapters, chapter_spec, run_chapter
+from railpaper.pipeline.chapters import (
+    PipelineError,
+    book_chapters,
+    chapter_spec,
+    run_chapter,
+)
 from railpaper.pipeline.ledger import write_ledger
 
 MATHJAX_SCRIPT = Path("_mathjax/node_modules/mathjax/es5/tex-chtml.js")

@@ -24,8 +24,13 @@ from typing import Callable
 from railpaper.data import read_toml
 from railpaper.paths import DATA_DIR
 from railpaper.pipeline.chapters import chapter_spec
-from railpaper.pipeline.claim_rules import (RULE_VERDICTS, check_row, is_untestable, rule_metrics,
-                                            verdict_on_run)
+from railpaper.pipeline.claim_rules import (
+    RULE_VERDICTS,
+    check_row,
+    is_untestable,
+    rule_metrics,
+    verdict_on_run,
+)
 from railpaper.pipeline.outputs import claims
 
 VERDICTS = RULE_VERDICTS + ("missing",)

@@ -6,17 +6,26 @@ runs and the payload's keys without spending minutes.
 """
 
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from railpaper.bench.report import (PROFILE_LABELS, WITHHELD, _load_benchmarks, busy_note,
-                                      findings_markdown, format_markdown, format_table,
-                                      ratio_verdict, setup_markdown, write_performance_files)
+from railpaper.bench import rbpf_engine as engine
+from railpaper.bench.report import (
+    PROFILE_LABELS,
+    WITHHELD,
+    busy_note,
+    findings_markdown,
+    format_markdown,
+    format_table,
+    ratio_verdict,
+    setup_markdown,
+    write_performance_files,
+)
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 
-BOOK = Path(__file__).resolve().parents[1] / "book"
+BOOK = Path(__file__).resolve().parents[2] / "book"
 
 #: The bench JSON's top-level keys before issue 15 (kept) and the ones it added.
 OLD_KEYS = {"steps_per_s_rbpf_lateral_N1000", "steps_per_s_rbpf_lateral_N1000_paper_scheme",
@@ -133,13 +142,11 @@ def test_page_has_no_hand_typed_numbers_and_its_includes_are_generated(tmp_path)
     assert included and included <= {f.name for f in tmp_path.iterdir()}
 
 
-def test_benchmarks_load_by_file_path_without_touching_sys_path():
-    before = list(sys.path)
-    engine = _load_benchmarks()
-    assert sys.path == before
+def test_the_bench_is_a_package_module_not_loaded_by_path():
+    from railpaper.bench import report
+    assert engine.__name__ == "railpaper.bench.rbpf_engine" and report.engine is engine
     assert engine.__file__.endswith("railpaper/bench/rbpf_engine.py")
     assert engine.FilterpyRBPF.__module__ == "railpaper.bench.filterpy_rbpf"
-    assert _load_benchmarks() is engine
 
 
 def test_interleaving_and_summaries():
@@ -161,10 +168,8 @@ def test_interleaving_and_summaries():
 def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     """main_payload with fake timings: every comparison alternates its engines, >= 5 times,
     and the payload has the old top-level keys and the new ones."""
-    engine = _load_benchmarks()
-    from railpaper.experiments.rbpf_parameter_estimation import experiment as E
     calls = []
-    p = dict(E.SPEC.resolve({}, False))
+    p = dict(SPEC.resolve({}, False))
     monkeypatch.setattr(engine, "lateral_problem", lambda n: dict(p=p))
 
     def fake_time(prob, kind, N, n_steps, per_step=False, skip=0):

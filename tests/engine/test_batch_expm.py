@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.linalg import expm, matrix_balance
 
-from railpaper.models import lateral_16state as L
 from railpaper.engine.sparse_zoh import KMAX, TOL, term_counts, zoh_affine, zoh_sparse
+from railpaper.models import lateral_16state as L
 
 DT = 1e-3          # s, the chapter's step
 SPEED = 300 / 3.6  # m/s
@@ -26,7 +26,7 @@ SPEED = 300 / 3.6  # m/s
 
 @pytest.fixture(scope="module")
 def lateral():
-    from railpaper.experiments.rbpf_parameter_estimation.experiment import vehicle
+    from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
     fixed, theta = vehicle()
     A0, Ak = L.affine_terms(fixed, SPEED)
     return A0, Ak, theta, L.input_matrix()
@@ -326,7 +326,7 @@ def test_affine_zoh_lane_independence_and_errors(lateral):
 def test_lateral_system_bits_do_not_depend_on_the_order_of_calls(lateral):
     """With theta_ref the balancing is fixed when the system is made: a particle's matrices are
     the same bits whichever filter called the system first and whatever its block-mates."""
-    from railpaper.experiments.rbpf_parameter_estimation.experiment import vehicle
+    from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
     fixed, theta = vehicle()
     Q, R = 1e-12 * np.eye(16), 1e-6 * np.eye(5)
     rng = np.random.default_rng(11)

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from railpaper.engine import kalman
-from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
 from railpaper.engine.qgrbpf import run_qgrbpf
 from railpaper.engine.rbpf import initial_bank, run_rbpf
+from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
 from railpaper.models import linear_toys as toys
 
 TRUTH_EQ18 = np.array([-0.4, 0.5, 0.5, 1.0])

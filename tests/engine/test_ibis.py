@@ -15,10 +15,9 @@ import pytest
 from railpaper.engine import ibis as ibis_module
 from railpaper.engine.ibis import credible_interval_covers, run_ibis
 from railpaper.engine.ibis_parts import weighted_quantiles
-from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.models.linear_toys import eq18_system, simulate_eq18
-
 
 
 @pytest.fixture(autouse=True)

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from railpaper.engine.batch_expm import expm_stack, zoh_stack
 from railpaper.discretise import zoh
+from railpaper.engine.batch_expm import expm_stack, zoh_stack
 from railpaper.engine.kalman import predict, update
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.kalman_bank import kalman_run, kalman_step
+from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.rbpf import RaoBlackwellisedPF, run_rbpf
 from railpaper.models import lateral_16state as L
 
@@ -80,7 +80,7 @@ def test_both_engines_skip_the_update_and_give_minus_inf_where_S_is_not_positive
 
 @pytest.fixture(scope="module")
 def lateral():
-    from railpaper.experiments.rbpf_parameter_estimation.experiment import vehicle
+    from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
     fixed, theta = vehicle()
     return fixed, theta, 300 / 3.6, 1e-3
 

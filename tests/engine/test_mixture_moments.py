@@ -13,7 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from railpaper.engine.rbpf import mixture_moments, mixture_moments_steps, mixture_moments_var
+from railpaper.engine.rbpf import (
+    mixture_moments,
+    mixture_moments_steps,
+    mixture_moments_var,
+)
 
 
 def mixture(seed: int, n_comp: int = 6, dim: int = 3):

@@ -3,10 +3,16 @@
 import numpy as np
 import pytest
 
-from railpaper.engine.particles import (effective_sample_size, gaussian_draws,
-                                            liu_west_move, liu_west_shrinkage,
-                                            multinomial_search_resample, normalise_log_weights,
-                                            systematic_resample, weighted_mean_cov)
+from railpaper.engine.particles import (
+    effective_sample_size,
+    gaussian_draws,
+    liu_west_move,
+    liu_west_shrinkage,
+    multinomial_search_resample,
+    normalise_log_weights,
+    systematic_resample,
+    weighted_mean_cov,
+)
 
 
 def test_systematic_resample_never_indexes_past_last():

@@ -5,12 +5,24 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.stats import multivariate_normal
 
-from railpaper.engine.grid_posterior import box_grid, grid_posterior, kalman_log_likelihoods
+from railpaper.engine.grid_posterior import (
+    box_grid,
+    grid_posterior,
+    kalman_log_likelihoods,
+)
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
 from railpaper.engine.rbpf import run_rbpf
 from railpaper.experiments.base import check_metrics
-from railpaper.models.linear_toys import (EQ18_G, EQ18_H, PAPER004_G, PAPER004_H, eq18_system,
-                                          paper004_system, simulate_eq18, simulate_paper004)
+from railpaper.models.linear_toys import (
+    EQ18_G,
+    EQ18_H,
+    PAPER004_G,
+    PAPER004_H,
+    eq18_system,
+    paper004_system,
+    simulate_eq18,
+    simulate_paper004,
+)
 
 Q_VAR = R_VAR = 0.001
 P0 = 0.05 ** 2 * np.eye(2)

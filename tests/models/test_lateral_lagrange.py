@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.models import lateral_16state as L
 
-FIXED, THETA = E.vehicle()
+FIXED, THETA = study.vehicle()
 PRIOR = E.SPEC.resolve({}, False)
 
 #: The paper's state vector X(t), typed from its text (before Eq. 10).

@@ -6,13 +6,12 @@ from filterpy.kalman import KalmanFilter
 from scipy.linalg import expm
 
 from railpaper.data import load_quantities
-
-from railpaper.paths import DATA_DIR
 from railpaper.discretise import zoh
 from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.rbpf import run_rbpf
 from railpaper.models import lateral_16state as L
+from railpaper.paths import DATA_DIR
 
 PARAMS = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
 FIXED = {k: PARAMS[k].value for k in L.FIXED_KEYS}

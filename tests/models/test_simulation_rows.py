@@ -10,10 +10,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from railpaper.data import load_quantities
-
-from railpaper.paths import DATA_DIR
 from railpaper.models import lateral_16state as L
 from railpaper.models import linear_toys as toys
+from railpaper.paths import DATA_DIR
 
 PARAMS = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
 FIXED = {k: PARAMS[k].value for k in L.FIXED_KEYS}

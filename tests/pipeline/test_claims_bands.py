@@ -7,7 +7,11 @@ import pytest
 from railpaper.data import read_toml
 from railpaper.pipeline.chapters import book_chapters
 from railpaper.pipeline.check import load_tolerances
-from railpaper.pipeline.claim_rules import (is_untestable, rule_metrics, verdicts_over_bands)
+from railpaper.pipeline.claim_rules import (
+    is_untestable,
+    rule_metrics,
+    verdicts_over_bands,
+)
 from railpaper.pipeline.outputs import chapter_data_dir
 
 MIN_SAMPLES = {"full": 20, "quick": 5}

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CHAPTER = "reduced-order-observer"
 WALL_CLOCK_WORDS = ("seconds", "_s_per", "wall", "time_per", "elapsed", "duration", "run_s")
 

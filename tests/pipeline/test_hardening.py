@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import REPO, railpaper_cli
 
 from railpaper.experiments.base import ParameterError, check_sample_time

@@ -8,8 +8,13 @@ import pytest
 
 from railpaper.cli import build_parser
 from railpaper.pipeline.chapters import book_chapters, chapter_spec
-from railpaper.pipeline.header import (CHAPTER_REFERENCES, bib_entries, parameter_unit,
-                                       reference_markdown, rerun_markdown)
+from railpaper.pipeline.header import (
+    CHAPTER_REFERENCES,
+    bib_entries,
+    parameter_unit,
+    reference_markdown,
+    rerun_markdown,
+)
 
 
 @pytest.mark.parametrize("chapter", book_chapters())

@@ -9,10 +9,19 @@ import pytest
 
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.chapters import book_chapters
+from railpaper.pipeline.ledger import (
+    CSV_COLUMNS,
+    VERDICTS,
+    LedgerRow,
+    build_ledger,
+    chapter_rows,
+    chapter_table,
+    judge,
+    ledger_counts,
+    ledger_markdown,
+    write_ledger_csv,
+)
 from railpaper.pipeline.outputs import chapter_data_dir
-from railpaper.pipeline.ledger import (CSV_COLUMNS, VERDICTS, LedgerRow, build_ledger,
-                                       chapter_rows, chapter_table, judge, ledger_counts,
-                                       ledger_markdown, write_ledger_csv)
 
 CLAIMS_TOML = """
 [fast]
@@ -245,9 +254,8 @@ def test_environment_table_matches_the_installed_packages(tmp_path):
     """The generated table holds the lock's pins; the venv built from the lock has them installed."""
     from importlib.metadata import version
 
-    from railpaper.pipeline.book import KEY_PACKAGES, locked_versions, write_environment
-
     from railpaper.paths import REPO_DIR
+    from railpaper.pipeline.book import KEY_PACKAGES, locked_versions, write_environment
     pins = locked_versions(REPO_DIR / "environment.lock")
     text = write_environment(tmp_path).read_text()
     for name in KEY_PACKAGES:

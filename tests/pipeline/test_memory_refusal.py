@@ -12,10 +12,14 @@ import textwrap
 import time
 
 import pytest
-
 from conftest import REPO, railpaper_cli
-from railpaper.experiments.base import (ParameterError, available_memory_bytes, check_banks,
-                                        particle_bank_bytes)
+
+from railpaper.experiments.base import (
+    ParameterError,
+    available_memory_bytes,
+    check_banks,
+    particle_bank_bytes,
+)
 
 
 @pytest.mark.parametrize("chapter, args, name", [

@@ -5,7 +5,6 @@ import json
 import re
 
 import pytest
-
 from conftest import railpaper_cli
 from test_book import rendered_dom
 

@@ -9,13 +9,18 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import railpaper_cli
 from distributed import LocalCluster
 
 from railpaper.cli import main
 from railpaper.experiments.reduced_order_observer import experiment as chapter
-from railpaper.pipeline.sweep import SINGLE_THREAD_ENV, parse_grid_option, parse_seeds, run_sweep
-
-from conftest import railpaper_cli
+from railpaper.experiments.reduced_order_observer.spec import SPEC
+from railpaper.pipeline.sweep import (
+    SINGLE_THREAD_ENV,
+    parse_grid_option,
+    parse_seeds,
+    run_sweep,
+)
 
 CHAPTER = "reduced-order-observer"
 FIXED = {"speeds_kmh": [60.0], "sweep_speeds_kmh": [60.0], "side_tables": False}
@@ -45,7 +50,7 @@ def test_local_workers_and_cluster_give_identical_metrics(tmp_path, scheduler):
     for metric in METRICS:
         assert local[metric].tolist() == remote[metric].tolist()      # bit-identical floats
     # independent reference: the experiment called directly in this process
-    direct = chapter.run(quick=True, **chapter.SPEC.resolve(dict(FIXED, noise_fraction=0.03,
+    direct = chapter.run(quick=True, **SPEC.resolve(dict(FIXED, noise_fraction=0.03,
                                                                  seed=1), True)).metrics
     row = remote[(remote.noise_fraction == 0.03) & (remote.seed == 1)].iloc[0]
     for metric in METRICS:

@@ -6,6 +6,7 @@ vehicle, LMI functional (partial-state) observer of the wheelset displacements.
 (``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.partial_state_observer.experiment import SPEC, run, validate
+from railpaper.experiments.partial_state_observer.experiment import run, validate
+from railpaper.experiments.partial_state_observer.spec import SPEC
 
 __all__ = ["SPEC", "run", "validate"]

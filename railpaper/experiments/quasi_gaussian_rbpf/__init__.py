@@ -6,6 +6,7 @@ toy, with the exact grid posterior as reference.
 (``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.quasi_gaussian_rbpf.experiment import SPEC, run, validate
+from railpaper.experiments.quasi_gaussian_rbpf.experiment import run, validate
+from railpaper.experiments.quasi_gaussian_rbpf.spec import SPEC
 
 __all__ = ["SPEC", "run", "validate"]

@@ -25,15 +25,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from railpaper.experiments.quasi_gaussian_rbpf.spec import (
+    FILTERS,
+    NO_THRESHOLD,
+    PARAMS,
+    QGRBPF_READINGS,
+)
 from railpaper.stats import median_interval, proportion_interval
 
-PARAMS = ("a", "b")
-#: Filters whose per-record metrics the table holds.
-FILTERS = ("rbpf", "rbpf_working", "qgrbpf", "qgrbpf_printed")
-#: The Q-GRBPF under each reading of Eq. (10): importance ratio (default), as printed.
-QGRBPF_READINGS = ("qgrbpf", "qgrbpf_printed")
-#: Suffix of the Q-GRBPF runs without the weight threshold (same record and random stream).
-NO_THRESHOLD = "_nothreshold"
 #: |z| at or below which a final estimate is "within 2 posterior std" (satisfactory).
 Z_SATISFACTORY = 2.0
 

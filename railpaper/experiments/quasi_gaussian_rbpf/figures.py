@@ -13,16 +13,10 @@ import numpy as np
 from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from railpaper.experiments.display import legend_below
-from railpaper.experiments.quasi_gaussian_rbpf.evidence import PARAMS
+from railpaper.experiments.quasi_gaussian_rbpf.result import ReadingsStudy
+from railpaper.experiments.quasi_gaussian_rbpf.spec import NAMES, PARAMS, STYLES
 
 WIDTH_IN = 7.0
-#: Display names of the filters (and of the exact posterior).
-NAMES = {"posterior": "exact posterior", "rbpf": "RBPF, paper's scheme",
-         "rbpf_working": "RBPF, working scheme", "qgrbpf": "Q-GRBPF, Eq. (10) as a ratio",
-         "qgrbpf_printed": "Q-GRBPF, Eq. (10) as printed"}
-#: Colour and line style of each filter.
-STYLES = {"rbpf": ("C0", "-"), "rbpf_working": ("C2", "-."), "qgrbpf": ("C3", "-"),
-          "qgrbpf_printed": ("C1", "--")}
 #: The paper's convergence steps and final errors (Section IV, discussion of Figs 1–4).
 PAPER_STEPS = {"a": {"qgrbpf": 4, "rbpf": 55}, "b": {"qgrbpf": 4, "rbpf": 53}}
 PAPER_ERRORS = {"a": {"qgrbpf": 0.066, "rbpf": 0.167}, "b": {"qgrbpf": -0.055, "rbpf": -0.067}}
@@ -200,4 +194,46 @@ def computing_time(result, params):
     fig.tight_layout(rect=(0, 0.17, 1, 1))
     fig.legend(handles[0] + extra[0], handles[1] + extra[1], loc="lower center", ncol=2,
                frameon=False)
+    return fig
+
+
+def plot_readings(study: ReadingsStudy):
+    """Median settling step of the exact posterior mean vs the figure's horizon, one line per
+    reading, with the paper's RBPF (55 / 53 ± 5) and Q-GRBPF (4 ± 5) steps shaded.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(7, 3.6), sharey=True, layout="constrained")
+    markers = "osd^v"
+    colours = ("tab:blue", "tab:orange", "black", "tab:purple", "tab:brown")
+    for ax, par in zip(axes, PARAMS):
+        rbpf = PAPER_STEPS[(par, "rbpf")]
+        ax.axhspan(rbpf - 5, rbpf + 5, color="tab:red", alpha=0.15, lw=0)
+        ax.axhspan(1, 9, color="tab:green", alpha=0.15, lw=0)
+        ax.text(study.horizons_steps[-1], rbpf + 6, f"RBPF: step {rbpf}", ha="right",
+                va="bottom", fontsize=8, color="tab:red")
+        ax.text(study.horizons_steps[-1], 10, "Q-GRBPF: step 4", ha="right", va="bottom",
+                fontsize=8, color="tab:green")
+        for reading, marker, colour in zip(study.readings, markers, colours):
+            rows = study.table[(study.table.reading == reading.key)
+                               & (study.table.parameter == par)]
+            h = rows.horizon_steps.to_numpy()
+            ax.errorbar(h, rows.settling_step, fmt=f"-{marker}", ms=4, capsize=2,
+                        yerr=[rows.settling_step - rows.settling_step_low,
+                              rows.settling_step_high - rows.settling_step],
+                        color=colour, label=reading.label)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xticks(study.horizons_steps, [str(h) for h in study.horizons_steps])
+        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.set_xlabel("figure horizon (steps)")
+        ax.set_title(f"parameter {par}", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+    axes[0].set_ylabel("settling step of the\nexact posterior mean")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=1,
+               fontsize=8, frameon=False)
     return fig

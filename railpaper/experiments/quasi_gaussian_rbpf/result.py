@@ -16,7 +16,7 @@ import pandas as pd
 from railpaper.engine.grid_posterior import GridPosterior
 from railpaper.engine.rbpf import FilterRun
 from railpaper.experiments.base import ChapterResult
-from railpaper.experiments.quasi_gaussian_rbpf.readings import ReadingsStudy
+from railpaper.experiments.quasi_gaussian_rbpf.spec import PAPER_STEPS
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,76 @@ class QuasiGaussianRBPFResult(ChapterResult):
     monte_carlo: pd.DataFrame = field(default_factory=pd.DataFrame)
     computing_time: ComputingTime | None = None
     readings: ReadingsStudy | None = None
+
+
+@dataclass(frozen=True)
+class Reading:
+    """One reading of the printed noise settings (variances of w, e and the state prior std)."""
+
+    key: str
+    label: str
+    q_var: float
+    r_var: float
+    p0_std: float
+    source: str
+
+
+@dataclass(frozen=True)
+class ReadingsStudy:
+    """The exact posterior's pace under every reading.
+
+    Attributes
+    ----------
+    readings : tuple of Reading
+    horizons_steps : tuple of int
+        Figure horizons H (steps) the settling step is read against.
+    table : pandas.DataFrame
+        One row per (reading, horizon, parameter): ``reading``, ``horizon_steps``, ``parameter``,
+        ``settling_step`` (median) with ``settling_step_low``/``_high`` (95 %), ``n_records``.
+    errors : pandas.DataFrame
+        One row per (reading, parameter): median |posterior mean − truth| at step 4
+        (``abs_error_step4``) and at the RBPF's step (``abs_error_rbpf_step``), posterior std at
+        both (``std_step4``, ``std_rbpf_step``).
+    settling_steps : numpy.ndarray, (readings, horizons, parameters, records)
+        Per-record settling steps behind ``table``.
+    """
+
+    readings: tuple
+    horizons_steps: tuple
+    table: pd.DataFrame
+    errors: pd.DataFrame
+    settling_steps: np.ndarray
+
+    def interval_gap(self, reading: str, par: str, step: int) -> float:
+        """:func:`interval_gap` of this study (steps)."""
+        return interval_gap(self.table, reading, par, step)
+
+    def metrics(self) -> dict:
+        """``reading_<key>_settling_step_<p>_h<H>`` (+ ``_low``, ``_high``, ``_n``),
+        ``reading_<key>_interval_gap_<p>_<rbpf|qgrbpf>`` (steps from the paper's step ± 5 to the
+        nearest interval; 0 = possible at some horizon) and
+        ``reading_<key>_abs_error_<p>_step{4,<rbpf step>}``."""
+        m = {}
+        for row in self.table.itertuples():
+            name = f"reading_{row.reading}_settling_step_{row.parameter}_h{row.horizon_steps}"
+            m.update({name: row.settling_step, f"{name}_low": row.settling_step_low,
+                      f"{name}_high": row.settling_step_high, f"{name}_n": row.n_records})
+        for reading in self.readings:
+            for (par, filt), step in PAPER_STEPS.items():
+                m[f"reading_{reading.key}_interval_gap_{par}_{filt}"] = self.interval_gap(
+                    reading.key, par, step)
+        for row in self.errors.itertuples():
+            step = PAPER_STEPS[(row.parameter, "rbpf")]
+            m[f"reading_{row.reading}_abs_error_{row.parameter}_step4"] = row.abs_error_step4
+            m[f"reading_{row.reading}_abs_error_{row.parameter}_step{step}"] = \
+                row.abs_error_rbpf_step
+        return m
+
+
+def interval_gap(table: pd.DataFrame, reading: str, par: str, step: int) -> float:
+    """Steps between the paper's ``step ± 5`` and the nearest 95 % interval of the posterior's
+    median settling step over all horizons (0: some horizon's interval meets it)."""
+    rows = table[(table.reading == reading) & (table.parameter == par)]
+    low, high = max(step - 5, 1), step + 5
+    return float(min(max(0.0, r.settling_step_low - high, low - r.settling_step_high)
+                     for r in rows.itertuples()))

@@ -11,8 +11,80 @@ import pandas as pd
 
 from railpaper.data import data_path, load_quantities
 from railpaper.experiments.display import markdown, number
-from railpaper.experiments.quasi_gaussian_rbpf.evidence import PARAMS
-from railpaper.experiments.quasi_gaussian_rbpf.figures import NAMES, STYLES
+from railpaper.experiments.quasi_gaussian_rbpf.result import ReadingsStudy
+from railpaper.experiments.quasi_gaussian_rbpf.spec import (
+    NAMES,
+    PAPER_STEPS,
+    PARAMS,
+    STYLES,
+)
+
+
+def _meets(row, low: float, high: float) -> bool:
+    """The row's 95 % interval of the settling step meets [low, high]."""
+    return row.settling_step_low <= high and row.settling_step_high >= low
+
+
+def possible_horizons(study: ReadingsStudy, reading: str, par: str, step: int) -> list[int]:
+    """Figure horizons (steps) at which the exact posterior's median settling step of ``par``
+    has a 95 % interval meeting ``step ± 5``: where a calibrated filter can show ``step``."""
+    rows = study.table[(study.table.reading == reading) & (study.table.parameter == par)]
+    return [int(r.horizon_steps) for r in rows.itertuples()
+            if _meets(r, max(step - 5, 1), step + 5)]
+
+
+def readings_table(study: ReadingsStudy) -> str:
+    """Markdown: per reading, the settling step of ``a`` at each horizon (median [95 %]) and the
+    posterior's absolute error and std of ``a`` at step 55 (no ``|`` inside a cell: it would
+    end the cell)."""
+    head = ["reading", "Q, R variance", "P0 std"] + [
+        f"settling step of a, {h}-step figure" for h in study.horizons_steps] + [
+        "abs. error of a at step 55 (median)", "posterior std of a at step 55 (median)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for reading in study.readings:
+        rows = study.table[(study.table.reading == reading.key) & (study.table.parameter == "a")]
+        err = study.errors[(study.errors.reading == reading.key)
+                           & (study.errors.parameter == "a")].iloc[0]
+        cells = [reading.label, f"{reading.q_var:.3g}, {reading.r_var:.3g}",
+                 f"{reading.p0_std:.3g}"]
+        cells += [f"{r.settling_step:g} [{r.settling_step_low:g}, {r.settling_step_high:g}]"
+                  for r in rows.itertuples()]
+        cells += [f"{err.abs_error_rbpf_step:.3g}", f"{err.std_rbpf_step:.3g}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def readings_summary(study: ReadingsStudy) -> str:
+    """Markdown bullets, computed from the study: under which reading and figure horizon a
+    calibrated filter can show the RBPF's step 55 (a) / 53 (b) and the Q-GRBPF's step 4."""
+    out, both = [], []
+    for reading in study.readings:
+        rb = {par: possible_horizons(study, reading.key, par, PAPER_STEPS[(par, "rbpf")])
+              for par in PARAMS}
+        qg = {par: possible_horizons(study, reading.key, par, 4) for par in PARAMS}
+        rb_h = sorted(set(rb["a"]) & set(rb["b"]))
+        qg_h = sorted(set(qg["a"]) & set(qg["b"]))
+        both += sorted(set(rb_h) & set(qg_h))
+        can = ([f"the RBPF's steps 55 / 53 if the figures showed {_list(rb_h)} steps"]
+               if rb_h else []) + ([f"the Q-GRBPF's step 4 if the figures showed {_list(qg_h)} steps"]
+                                   if qg_h else [])
+        cannot = ([] if rb_h else ["the RBPF's steps 55 / 53"]) + (
+            [] if qg_h else ["the Q-GRBPF's step 4"])
+        text = "; ".join(([f"a calibrated filter can show {'; '.join(can)}"] if can else [])
+                         + ([f"no calibrated filter shows {' or '.join(cannot)}"]
+                            if cannot else []))
+        out.append(f"* **{reading.label}**: {text}.")
+    out.append("* " + ("Under no reading and no horizon can a calibrated filter show both the "
+                       "RBPF's and the Q-GRBPF's steps: one of the two filters does not follow "
+                       "the data." if not both else
+                       f"Both steps are possible together at horizons {_list(both)}."))
+    return "\n".join(out)
+
+
+def _list(values) -> str:
+    values = [str(v) for v in values]
+    return values[0] if len(values) == 1 else ", ".join(values[:-1]) + " or " + values[-1]
+
 
 __all__ = ["parameter_table", "errata_table", "grid_check", "monte_carlo_table", "timing_table",
            "collapse_summary"]

@@ -28,11 +28,20 @@ from __future__ import annotations
 import time
 
 from railpaper import track
-from railpaper.experiments.base import ParameterError, check_banks, check_sample_time, no_progress
+from railpaper.experiments.base import (
+    ParameterError,
+    check_banks,
+    check_sample_time,
+    no_progress,
+)
 from railpaper.experiments.rbpf_parameter_estimation import evidence, lateral, posterior
-from railpaper.experiments.rbpf_parameter_estimation.measurements import read_measurements
+from railpaper.experiments.rbpf_parameter_estimation.measurements import (
+    read_measurements,
+)
 from railpaper.experiments.rbpf_parameter_estimation.model_error import run_model_error
-from railpaper.experiments.rbpf_parameter_estimation.result import RbpfParameterEstimationResult
+from railpaper.experiments.rbpf_parameter_estimation.result import (
+    RbpfParameterEstimationResult,
+)
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy
 from railpaper.models import lateral_16state as L

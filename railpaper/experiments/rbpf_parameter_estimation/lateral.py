@@ -28,9 +28,14 @@ from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.rbpf import FilterRun, run_rbpf
 from railpaper.estimators.ekf import run_augmented_ekf
 from railpaper.experiments.rbpf_parameter_estimation import posterior
-from railpaper.experiments.rbpf_parameter_estimation.measurements import read_measurements
-from railpaper.experiments.rbpf_parameter_estimation.result import (LateralPart, LateralRecord,
-                                                                    LateralRun)
+from railpaper.experiments.rbpf_parameter_estimation.measurements import (
+    read_measurements,
+)
+from railpaper.experiments.rbpf_parameter_estimation.result import (
+    LateralPart,
+    LateralRecord,
+    LateralRun,
+)
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 from railpaper.models import lateral_16state as L
 from railpaper.paths import DATA_DIR

@@ -44,12 +44,13 @@ import pandas as pd
 
 from railpaper import contact, sensors, track
 from railpaper.data import load_quantities
-from railpaper.paths import DATA_DIR
-from railpaper.experiments.rbpf_parameter_estimation import lateral
 from railpaper.experiments.base import no_progress
+from railpaper.experiments.rbpf_parameter_estimation import lateral
+from railpaper.experiments.rbpf_parameter_estimation.result import LateralRecord
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 from railpaper.models import lateral_16state as L
 from railpaper.models import lateral_truth as T
-from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.paths import DATA_DIR
 from railpaper.settling import holds_from
 from railpaper.stats import rate
 from railpaper.threads import one_thread
@@ -152,7 +153,7 @@ def chain_output(signal_fine: np.ndarray, noise: np.ndarray, p: dict, st: dict) 
 
 
 def simulate_mismatch(p: dict, fixed: dict, theta: np.ndarray, seed: int, st: dict
-                      ) -> tuple[lateral.LateralRecord, dict]:
+                      ) -> tuple[LateralRecord, dict]:
     """One record of the truth plant with settings ``st`` (:func:`mismatch_settings`).
 
     Returns
@@ -188,7 +189,7 @@ def simulate_mismatch(p: dict, fixed: dict, theta: np.ndarray, seed: int, st: di
                 if np.isfinite(scale) and rms_d > 0 else 1.0,
                 **{f"model_error_{c}": float(e) for c, e in
                    zip(L.CHANNELS, np.sqrt(np.mean(err ** 2, axis=0)) / std)})
-    record = lateral.LateralRecord(seed=seed, y=y, u_mps=dq[0:-1:sub][:p["n_steps"]],
+    record = LateralRecord(seed=seed, y=y, u_mps=dq[0:-1:sub][:p["n_steps"]],
                                    du_var_m2ps2=np.diff(dq[::sub], axis=0).var(axis=0),
                                    u_var_m2ps2=dq.var(axis=0))
     return record, diag

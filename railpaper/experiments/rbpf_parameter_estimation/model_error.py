@@ -17,8 +17,12 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.rbpf_parameter_estimation import lateral
-from railpaper.experiments.rbpf_parameter_estimation.mismatch import (START, MismatchResult,
-                                                                      plant_metrics, run_mismatch)
+from railpaper.experiments.rbpf_parameter_estimation.mismatch import (
+    START,
+    MismatchResult,
+    plant_metrics,
+    run_mismatch,
+)
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralPart
 from railpaper.settling import holds_from
 

@@ -36,16 +36,18 @@ import pandas as pd
 
 from railpaper.engine.ibis import credible_interval_covers, run_ibis
 from railpaper.experiments.rbpf_parameter_estimation import toy
-from railpaper.experiments.rbpf_parameter_estimation.result import (LateralPart, LateralRecord,
-                                                                    PosteriorRun, ToyPart)
+from railpaper.experiments.rbpf_parameter_estimation.result import (
+    LateralPart,
+    LateralRecord,
+    PosteriorRun,
+    ToyPart,
+)
 from railpaper.models import lateral_16state as L
 from railpaper.models.linear_toys import EQ18_G, Simulation
-from railpaper.stats import median_interval
 from railpaper.settling import holds_from
-from railpaper.stats import rate
+from railpaper.stats import median_interval, rate
 
 SEED_KEY = 17                      # the samplers' generators: [seed, SEED_KEY]
-STEPS = (100, 350, 1000)           # the steps the issue reports, besides the last
 START, WITHIN = 350, 0.05          # the paper's claim: every parameter within 5 % after 350 steps
 PROPOSAL = "independent"
 
@@ -185,11 +187,6 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
     return out
 
 
-def steps_reported(K: int) -> list[int]:
-    """The steps of :data:`STEPS` inside a record of K steps, then K (sorted, no repeats)."""
-    return sorted({k for k in STEPS if k <= K} | {K})
-
-
-__all__ = ["PROPOSAL", "SEED_KEY", "STEPS", "lateral_metrics", "lateral_posterior",
-           "steps_reported", "toy_box", "toy_metrics", "toy_posterior", "toy_posterior_json",
+__all__ = ["PROPOSAL", "SEED_KEY", "lateral_metrics", "lateral_posterior",
+           "toy_box", "toy_metrics", "toy_posterior", "toy_posterior_json",
            "toy_posteriors", "toy_record_table"]

@@ -301,5 +301,13 @@ class RbpfParameterEstimationResult(ChapterResult):
     mismatch: object | None = None
 
 
+STEPS = (100, 350, 1000)           # the steps the issue reports, besides the last
+
+
+def steps_reported(K: int) -> list[int]:
+    """The steps of :data:`STEPS` inside a record of K steps, then K (sorted, no repeats)."""
+    return sorted({k for k in STEPS if k <= K} | {K})
+
+
 __all__ = ["LateralPart", "LateralRecord", "LateralRun", "PosteriorRun",
            "RbpfParameterEstimationResult", "ToyPart", "ToyRun"]

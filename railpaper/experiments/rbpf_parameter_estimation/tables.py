@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.display import markdown, number
-from railpaper.experiments.rbpf_parameter_estimation.posterior import steps_reported
+from railpaper.experiments.rbpf_parameter_estimation.result import steps_reported
 from railpaper.models.lateral_16state import PARAM_NAMES
 
 #: Display names of the five lateral parameters (LaTeX, for Markdown tables and plot labels).

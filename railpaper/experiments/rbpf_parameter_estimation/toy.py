@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.engine.rbpf import FilterRun, run_rbpf
+from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
 from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
 from railpaper.settling import settling_step

@@ -7,6 +7,7 @@ contact.
 (``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.reduced_order_observer.experiment import SPEC, run, validate
+from railpaper.experiments.reduced_order_observer.experiment import run, validate
+from railpaper.experiments.reduced_order_observer.spec import SPEC
 
 __all__ = ["SPEC", "run", "validate"]

@@ -26,21 +26,21 @@ from __future__ import annotations
 
 from fractions import Fraction
 
-import numba
 import numpy as np
 import pandas as pd
 
-from railpaper import contact, stats, track
-from railpaper.discretise import foh
+from railpaper import stats, track
 from railpaper.estimators import reduced_order_observer as roo
+from railpaper.experiments.reduced_order_observer.record import (
+    _observer_batch,
+    _plant_batch,
+    all_speeds,
+    noise_draws,
+    profile,
+)
+from railpaper.experiments.reduced_order_observer.spec import READINGS
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settling_time_s
-
-#: Readings of the paper's P0 (Eq. 3), default (the chapter's) first; see ``single_wheelset``.
-READINGS = sw.P0_BASES
-
-#: Shortest and longest wavelengths of the FRA spectrum's validity range, m.
-FRA_BAND_M = (1.524, 304.8)
 
 #: Pole sets (1/s) the reduced-order observer is placed at to test "poles can be placed freely".
 POLE_SETS = ([-5.0, -80.0], [-150.0, -200.0], [-1000.0, -1500.0], [-60.0 + 40.0j, -60.0 - 40.0j])
@@ -49,99 +49,6 @@ POLE_SETS = ([-5.0, -80.0], [-150.0, -200.0], [-1000.0, -1500.0], [-60.0 + 40.0j
 SAMPLE_COLUMNS = ("convergence_time_s", "predicted_convergence_time_s", "displacement_rms_error_m",
                   "displacement_relative_rms_error", "force_rms_N", "force_rms_error_N",
                   "force_relative_rms_error", "force_rms_error_N_fixed_noise", "z_w_rms_m")
-
-
-def all_speeds(params: dict) -> list[float]:
-    """Speeds of the main runs then of the sweep, without repeats, km/h (the run's order)."""
-    return list(dict.fromkeys(params["speeds_kmh"] + params["sweep_speeds_kmh"]))
-
-
-def profile(params: dict, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Track profile (distance_m, irregularity_m) of one seed, long enough for every speed."""
-    length_m = max(max(all_speeds(params)) / 3.6 * params["duration_s"] + 10.0, 2 * FRA_BAND_M[1])
-    return track.synthesize_profile(
-        f"fra-{params['track_class']}", "vertical", length_m, 0.05, seed,
-        wavelength_min_m=FRA_BAND_M[0], wavelength_max_m=FRA_BAND_M[1])
-
-
-def noise_draws(seed: int, speed_kmh: float, n_samples: int, salt: tuple = ()):
-    """Standard-normal sensor draws (K, 2) on [ż_c, z_c] and (K,) on q of one run."""
-    rng = np.random.default_rng([seed, int(round(speed_kmh * 1000)), *salt])
-    return rng.standard_normal((n_samples, 2)), rng.standard_normal(n_samples)
-
-
-def _plant_batch(vehicle, plant, dt_s, q):
-    """Plant response to q (K, N) from rest on q[0]: y = [ż_c, z_c] (K, N, 2) and z_w (K, N).
-
-    ``plant="linear"``: exact for q linear between samples (FOH); ``"hertz"``: RK4 with four
-    substeps per sample and q linear between samples, as the chapter's single runs (compiled:
-    :func:`_hertz_kernel`).
-    """
-    x = np.zeros((4, q.shape[1]))
-    x[1] = x[3] = q[0]
-    out = np.empty((len(q), q.shape[1], 3))
-    out[0] = x[[0, 1, 3]].T
-    if plant == "linear":
-        Phi, G0, G1 = foh(*sw.state_space(vehicle), dt_s)
-        ga, gb = (G0 - G1)[:, :1], G1[:, :1]
-        for k in range(len(q) - 1):
-            x = Phi @ x + ga * q[k] + gb * q[k + 1]
-            out[k + 1] = x[[0, 1, 3]].T
-        return out[..., :2], out[..., 2]
-    G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
-    _hertz_kernel(np.ascontiguousarray(q, dtype=float), dt_s / 4, 4, np.array([
-        vehicle.car_body_mass_kg, vehicle.wheelset_mass_kg, vehicle.suspension_damping_Ns_per_m,
-        vehicle.suspension_stiffness_N_per_m, G, P0, float(vehicle.contacts),
-        contact.static_compression(P0, G)]), out)
-    return out[..., :2], out[..., 2]
-
-
-@numba.njit(cache=True)
-def _hertz_derivative(x, q, c):
-    """:func:`railpaper.models.single_wheelset.nonlinear_derivative`, compiled; ``c`` = M_c, M_w,
-    C_p, K_p, G, P0, contacts, δ0."""
-    suspension = c[3] * (x[1] - x[3]) + c[2] * (x[0] - x[2])
-    delta = c[7] + x[3] - q
-    force = (max(delta, 0.0) / c[4]) ** 1.5 if delta > 0.0 else 0.0
-    dynamic_contact = c[6] * (force - c[5])
-    return np.array([-suspension / c[0], x[0], (suspension - dynamic_contact) / c[1], x[2]])
-
-
-@numba.njit(cache=True)
-def _hertz_kernel(q, h, substeps, c, out):
-    """RK4 of the Hertz plant from rest on q[0], ``substeps`` steps of h per sample, q linear
-    between samples (the operations of :func:`railpaper.experiments.reduced_order_observer.record.
-    _simulate_hertz`, per column of q); fills out[k, n] = [ż_c, z_c, z_w]."""
-    K, N = q.shape
-    for n in range(N):
-        x = np.array([0.0, q[0, n], 0.0, q[0, n]])
-        out[0, n, 0], out[0, n, 1], out[0, n, 2] = x[0], x[1], x[3]
-        for k in range(K - 1):
-            for j in range(substeps):
-                dq = q[k + 1, n] - q[k, n]
-                qa = q[k, n] + dq * (j + 0.0) / substeps
-                qm = q[k, n] + dq * (j + 0.5) / substeps
-                qb = q[k, n] + dq * (j + 1.0) / substeps
-                k1 = _hertz_derivative(x, qa, c)
-                k2 = _hertz_derivative(x + 0.5 * h * k1, qm, c)
-                k3 = _hertz_derivative(x + 0.5 * h * k2, qm, c)
-                k4 = _hertz_derivative(x + h * k3, qb, c)
-                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-            out[k + 1, n, 0], out[k + 1, n, 1], out[k + 1, n, 2] = x[0], x[1], x[3]
-
-
-def _observer_batch(observer, y, q, x2_initial):
-    """Estimated z_w (K, N) of a discrete reduced-order observer on y (K, N, 2), q (K, N)."""
-    v = np.concatenate([y, q[..., None]], axis=2)
-    drive = v[:-1] @ observer.Gamma_now.T + v[1:] @ observer.Gamma_next.T
-    w = x2_initial - y[0] @ observer.L.T
-    z = np.empty(q.shape)
-    PhiT, L = observer.Phi.T, observer.L
-    z[0] = w[:, 1]
-    for k in range(len(q) - 1):
-        w = w @ PhiT + drive[k]
-        z[k + 1] = w[:, 1]
-    return z + y @ L[1]
 
 
 def _rms(x, axis=0):

@@ -22,75 +22,28 @@ track shaping filter and its RTS smoother beside the paper's observer (metrics
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from railpaper import track
 from railpaper.estimators import reduced_order_observer as roo
-from railpaper.experiments.reduced_order_observer import evidence
-from railpaper.experiments.reduced_order_observer import kalman
-from railpaper.experiments.base import ChapterResult, ChapterSpec, Parameter, ParameterError
+from railpaper.experiments.base import ParameterError
+from railpaper.experiments.reduced_order_observer import evidence, kalman, record
 from railpaper.experiments.reduced_order_observer.record import (  # noqa: F401 (chapter API)
-    ObserverRun, Record, SpeedRun, _simulate_hertz, run_observer,
-    simulate_record, simulate_speed)
-from railpaper.models import single_wheelset as sw
-
-SPEC = ChapterSpec(
-    name="reduced-order-observer",
-    title="Reduced-order observer of the wheel–rail force (Li, Zheng & Chai 2014)",
-    paper="001_b49ad810fb7b323c.txt",
-    notebook="reduced_order_observer.ipynb",
-    quick_sizes="1 s simulated instead of 2 s; trend sweep over 4 speeds instead of 9; "
-                "40 Monte Carlo seeds instead of 20 (a 1 s run's trends are noisier)",
-    notebook_requires={"side_tables": True},
-    parameters=[
-        Parameter("speeds_kmh", [60.0, 100.0], "list[float]",
-                  "speeds of the main runs (figures, time series, metrics), km/h", positive=True),
-        Parameter("sweep_speeds_kmh", [40.0, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0],
-                  "list[float]", "speeds of the trend figures, km/h",
-                  quick=[40.0, 100.0, 160.0, 200.0], positive=True),
-        Parameter("duration_s", 2.0, "float", "simulated time per run, s", quick=1.0, positive=True),
-        Parameter("dt_s", 1e-4, "float", "time step of plant samples and observer (paper: 1e-4 s), s",
-                  positive=True),
-        Parameter("observer_poles", [-30.0, -40.0], "list[float]",
-                  "poles of the observer error dynamics A22 − L·A12, 1/s (real, negative)"),
-        Parameter("observer_form", "paper", "str",
-                  "discretisation of observer (12): 'paper' (y, q held over a step, ZOH) or 'foh' "
-                  "(y, q linear between samples)"),
-        Parameter("plant", "linear", "str",
-                  "plant that generates the truth: 'linear' (paper) or 'hertz' (nonlinear contact)"),
-        Parameter("noise_fraction", 0.01, "float",
-                  "sensor noise σ as a fraction of each measured channel's RMS (paper's D = 0.01)",
-                  minimum=0.0),
-        Parameter("track_noise_fraction", 0.0, "float",
-                  "noise σ on the irregularity q given to the observer, fraction of its RMS",
-                  minimum=0.0),
-        Parameter("initial_error_m", 0.005, "float",
-                  "initial error of the observer's wheelset displacement, m"),
-        Parameter("track_class", 5, "int", "US FRA track class (1-6) of the vertical profile",
-                  minimum=1),
-        Parameter("convergence_fraction", 0.05, "float",
-                  "convergence threshold as a fraction of the RMS of the true z_w", positive=True),
-        Parameter("error_window_start_s", 0.5, "float",
-                  "force errors are measured from this time to the end of the run, s", minimum=0.0),
-        Parameter("p0_basis", "wheel", "str",
-                  "reading of P0 in Eq. (3) for the single runs: 'wheel' (per-wheel static load, "
-                  "two contacts) or 'wheelset' (the text: wheelset static load, one contact); the "
-                  "Monte Carlo evidence always covers both"),
-        Parameter("seed", 0, "int", "seed of the track profile and the sensor noise", minimum=0),
-        Parameter("mc_seeds", 20, "int",
-                  "Monte Carlo seeds (seed, seed + 1 and so on; fewer than 1000) behind every claim verdict",
-                  quick=40, minimum=2),
-        Parameter("side_tables", True, "bool",
-                  "also compute the noise-sensitivity and linear-vs-Hertz tables and the Monte "
-                  "Carlo evidence (sweep samples switch them off: they need only the main runs)"),
-    ],
+    ObserverRun,
+    Record,
+    SpeedRun,
+    _simulate_hertz,
+    run_observer,
+    simulate_record,
+    simulate_speed,
 )
-
-#: Sensor-noise levels (fraction of channel RMS) of the noise-sensitivity table.
-NOISE_SWEEP_FRACTIONS = (0.0, 1e-5, 1e-4, 1e-3, 1e-2)
+from railpaper.experiments.reduced_order_observer.result import (
+    ReducedOrderObserverResult,
+)
+from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTIONS
+from railpaper.models import single_wheelset as sw
 
 
 def validate(params: dict) -> None:
@@ -129,54 +82,6 @@ def _label(speed_kmh: float) -> str:
     return f"{speed_kmh:g}kmh"
 
 
-@dataclass
-class ReducedOrderObserverResult(ChapterResult):
-    """What :func:`run` returns: the pipeline's :class:`ChapterResult` plus named results.
-
-    Attributes
-    ----------
-    vehicle : SingleWheelset
-        The vehicle of the single runs (reading ``p0_basis``).
-    A, B : ndarray
-        Continuous ``ẋ = A x + B q`` of the vehicle (Eq. 7, errata fixed), SI units.
-    observer : ReducedOrderObserver
-        The continuous observer of Eq. (12) with error poles ``observer_poles``.
-    error_poles_per_s : ndarray
-        Eigenvalues of ``A22 − L A12``, 1/s.
-    runs : dict of float to SpeedRun
-        The single runs of seed ``seed``, by speed (km/h): ``speeds_kmh`` then the sweep.
-    speed_sweep : DataFrame
-        One row per sweep speed (``speed_kmh``); the ``observer_form`` observer's convergence
-        time (s, -1 never), force and displacement RMS errors (N, m), the force RMS (N), and the
-        other discretisation's convergence time and force error (suffix ``_paper``/``_foh``).
-    noise_sweep : DataFrame
-        Force relative RMS error and displacement RMS error (m) against ``noise_fraction`` at
-        the first speed (seed ``seed``, its own noise draws); empty without ``side_tables``.
-    plant_comparison : DataFrame
-        Linear vs Hertz plant, noise-free, FOH observer: force RMS (N), its RMS error (N), the
-        fraction of samples with contact lost; empty without ``side_tables``.
-    monte_carlo : DataFrame
-        :func:`evidence.monte_carlo` samples (``mc_seeds`` seeds × speeds × readings); empty
-        without ``side_tables``.
-    estimators : KalmanComparison or None
-        :func:`kalman.compare`: the paper's observer, the Kalman filter with a track shaping
-        filter and its RTS smoother on the Monte Carlo records at several noise levels; None
-        without ``side_tables``.
-    """
-
-    vehicle: sw.SingleWheelset | None = None
-    A: np.ndarray | None = None
-    B: np.ndarray | None = None
-    observer: roo.ReducedOrderObserver | None = None
-    error_poles_per_s: np.ndarray | None = None
-    runs: dict = field(default_factory=dict)
-    speed_sweep: pd.DataFrame = field(default_factory=pd.DataFrame)
-    noise_sweep: pd.DataFrame = field(default_factory=pd.DataFrame)
-    plant_comparison: pd.DataFrame = field(default_factory=pd.DataFrame)
-    monte_carlo: pd.DataFrame = field(default_factory=pd.DataFrame)
-    estimators: kalman.KalmanComparison | None = None
-
-
 def _rms(x, axis=0):
     return np.sqrt(np.mean(x**2, axis=axis))
 
@@ -191,18 +96,18 @@ def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
     def inputs(speed, salt):
         t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], dt,
                                        params["duration_s"])
-        ny, nq = evidence.noise_draws(seed, speed, len(t_s), salt)
+        ny, nq = record.noise_draws(seed, speed, len(t_s), salt)
         return t_s, q[:, 0], ny, nq
 
     def errors(observer, y, q, q_meas, z_w, force, window):
         x2 = np.column_stack([np.zeros(q.shape[1]), q[0] + e0])
-        z_est = evidence._observer_batch(observer, y, q_meas, x2)
+        z_est = record._observer_batch(observer, y, q_meas, x2)
         f_est = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
         return _rms((f_est - force)[window]), _rms((z_est - z_w)[window])
 
     speed, fractions = params["speeds_kmh"][0], np.array(NOISE_SWEEP_FRACTIONS)
     t_s, q, ny, nq = inputs(speed, (1,))
-    y, z_w = evidence._plant_batch(vehicle, params["plant"], dt, q[:, None])
+    y, z_w = record._plant_batch(vehicle, params["plant"], dt, q[:, None])
     force = sw.dynamic_contact_force_N(vehicle, z_w, q[:, None], params["plant"])
     window = t_s >= params["error_window_start_s"]
     y_meas = y + ny[:, None] * fractions[:, None] * _rms(y)               # (K, levels, 2)
@@ -221,7 +126,7 @@ def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
     plant_rows = []
     for plant in ("linear", "hertz"):                      # cost of linearising the contact
         progress(0.55, f"{plant} plant, noise-free")
-        y, z_w = evidence._plant_batch(vehicle, plant, dt, q)
+        y, z_w = record._plant_batch(vehicle, plant, dt, q)
         force = sw.dynamic_contact_force_N(vehicle, z_w, q, plant)
         force_error, _ = errors(observers["foh"], y, q, q_meas, z_w, force, window)
         lost = np.mean(force <= -vehicle.contacts * vehicle.static_wheel_load_N, axis=0)
@@ -250,8 +155,8 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
     observers = design_observers(A, B, params)
     form = params["observer_form"]
     other = "foh" if form == "paper" else "paper"
-    all_speeds = evidence.all_speeds(params)
-    distance_m, profile_m = evidence.profile(params, params["seed"])
+    all_speeds = record.all_speeds(params)
+    distance_m, profile_m = record.profile(params, params["seed"])
     runs = {}
     for i, speed in enumerate(all_speeds):
         progress(0.5 * i / len(all_speeds), f"{speed:g} km/h")

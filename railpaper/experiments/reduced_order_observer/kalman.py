@@ -23,7 +23,7 @@ initial guess (body states from the first measurement, ``z_w`` off by ``initial_
 
 Every sample is a record of the chapter's Monte Carlo: seed ``s`` at speed ``v`` has the track
 profile and the standard-normal sensor draws of the chapter's single run with ``seed = s``
-(:func:`evidence.noise_draws`), scaled to each noise level (common random numbers across
+(:func:`record.noise_draws`), scaled to each noise level (common random numbers across
 levels), so the observer's ratios at the chapter's noise equal the Monte Carlo table's.  Two
 sweeps: every seed at every sensor noise level of :func:`noise_levels` (the run's noise on q),
 and the first :data:`TRACK_NOISE_SEEDS` seeds at every noise level on the q record of
@@ -42,8 +42,13 @@ from railpaper import stats, track
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
 from railpaper.estimators import reduced_order_observer as roo
-from railpaper.experiments.reduced_order_observer import evidence
 from railpaper.experiments import track_shaping
+from railpaper.experiments.reduced_order_observer import record, spec
+from railpaper.experiments.reduced_order_observer.result import (
+    ForceEstimates,
+    KalmanComparison,
+)
+from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS
 from railpaper.models import single_wheelset as sw
 
 #: Sensor-noise levels (σ / channel RMS) of the comparison; the run's ``noise_fraction`` is added.
@@ -60,18 +65,15 @@ Q_NOISE_FLOOR = 1e-6
 #: Smallest σ of a body channel the filter assumes (a noise-free run), fraction of its std.
 Y_NOISE_FLOOR = 1e-6
 
-#: The estimators compared, with their display names.
-ESTIMATORS = {"observer": "paper's observer", "kalman": "Kalman filter",
-              "smoother": "RTS smoother (offline)"}
 
 
 def shaping_filter(track_class: int, speed_mps: float) -> kb.ShapingFilter:
     """Second-order shaping filter fitted to the FRA vertical spectrum seen at speed V.
 
     The temporal one-sided PSD is ``S(Ω = ω/V)/V`` over the profile's wavelength band
-    (:data:`evidence.FRA_BAND_M`), with the band's variance as a constraint.
+    (:data:`spec.FRA_BAND_M`), with the band's variance as a constraint.
     """
-    return track_shaping.shaping_filter(f"fra-{track_class}", speed_mps, evidence.FRA_BAND_M)[0]
+    return track_shaping.shaping_filter(f"fra-{track_class}", speed_mps, spec.FRA_BAND_M)[0]
 
 
 @dataclass(frozen=True)
@@ -123,46 +125,6 @@ def filter_covariances(model: KalmanModel, configs, params: dict):
     return R, P0
 
 
-@dataclass(frozen=True)
-class ForceEstimates:
-    """One record (seed ``seed``, the run's noise) with every estimator's force, N.
-
-    Attributes
-    ----------
-    t_s : ndarray (K,)
-    force_true_N, observer_N, kalman_N, smoother_N : ndarray (K,)
-    """
-
-    t_s: np.ndarray
-    force_true_N: np.ndarray
-    observer_N: np.ndarray
-    kalman_N: np.ndarray
-    smoother_N: np.ndarray
-
-
-@dataclass(frozen=True)
-class KalmanComparison:
-    """The estimators on the chapter's Monte Carlo records at several noise levels.
-
-    Attributes
-    ----------
-    samples : DataFrame
-        One row per (seed, speed_kmh, noise_fraction, track_noise_fraction, estimator, sweep):
-        ``force_rms_N`` (true force over the error window, N), ``force_rms_error_N`` (N) and
-        ``ratio`` (their quotient), ``q_rms_m`` (RMS of the record's q, m); ``sweep`` is ``"sensor"`` (every seed, every sensor noise
-        level, the run's track noise) or ``"track"`` (the first seeds, the run's sensor noise,
-        every track noise level).
-    examples : dict of float to ForceEstimates
-        Per speed, the forces of seed ``seed`` at the run's ``noise_fraction``.
-    shaping : dict of float to ShapingFilter
-        The fitted track shaping filter per speed.
-    """
-
-    samples: pd.DataFrame
-    examples: dict
-    shaping: dict
-
-
 def _rms(x, axis=0):
     return np.sqrt(np.mean(x**2, axis=axis))
 
@@ -190,12 +152,12 @@ def _simulate(vehicle, params, speed, profiles) -> _Records:
     for seed, (distance_m, profile_m) in profiles.items():
         t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], params["dt_s"],
                                        params["duration_s"])
-        ny, nq = evidence.noise_draws(seed, speed, len(t_s))
+        ny, nq = record.noise_draws(seed, speed, len(t_s))
         columns_q.append(q[:, 0])
         draws_y.append(ny)
         draws_q.append(nq)
     q = np.column_stack(columns_q)                                      # (K, S)
-    y, z_w = evidence._plant_batch(vehicle, params["plant"], params["dt_s"], q)
+    y, z_w = record._plant_batch(vehicle, params["plant"], params["dt_s"], q)
     return _Records(list(profiles), t_s, q, y,
                     sw.dynamic_contact_force_N(vehicle, z_w, q, params["plant"]),
                     np.stack(draws_y, axis=1), np.column_stack(draws_q))
@@ -213,7 +175,7 @@ def _speed_samples(vehicle, model, observer, params, speed, records: _Records, c
     meas[..., :2] = y[:, None] + records.draws_y[:, None] * sensor[..., None] * _rms(y)
     meas[..., 2] = q[:, None] + records.draws_q[:, None] * track_noise * _rms(q)
     x2_initial = np.stack([np.zeros(S), q[0] + params["initial_error_m"]], axis=-1)   # (S, 2)
-    estimates = {"observer": sw.dynamic_contact_force_N(vehicle, evidence._observer_batch(
+    estimates = {"observer": sw.dynamic_contact_force_N(vehicle, record._observer_batch(
         observer, meas[..., :2].reshape(len(q), L * S, 2), meas[..., 2].reshape(len(q), L * S),
         np.tile(x2_initial, (L, 1))).reshape(len(q), L, S), meas[..., 2])}
     R, P0 = filter_covariances(model, configs, params)
@@ -248,7 +210,7 @@ def compare(params: dict, progress=None) -> KalmanComparison:
     A, B = sw.state_space(vehicle)
     hold = "zoh" if params["observer_form"] == "paper" else "foh"
     observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], hold)
-    profiles = {seed: evidence.profile(params, seed)
+    profiles = {seed: record.profile(params, seed)
                 for seed in range(params["seed"], params["seed"] + params["mc_seeds"])}
     levels = noise_levels(params)
     run_noise, run_track = float(params["noise_fraction"]), float(params["track_noise_fraction"])

@@ -9,13 +9,17 @@ discretisations of the observer.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+import numba
 import numpy as np
 
-from railpaper import track
+from railpaper import contact, track
 from railpaper.discretise import foh, simulate_foh
-from railpaper.experiments.reduced_order_observer import evidence
+from railpaper.experiments.reduced_order_observer.result import (
+    ObserverRun,
+    Record,
+    SpeedRun,
+)
+from railpaper.experiments.reduced_order_observer.spec import FRA_BAND_M
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settling_time_s
 
@@ -40,52 +44,18 @@ def _simulate_hertz(vehicle, t_s, q_m, x0, substeps=4):
     return x
 
 
-@dataclass(frozen=True)
-class Record:
-    """One simulated record at one speed: the truth and what the observer is given (SI units).
-
-    Attributes
-    ----------
-    speed_kmh : float
-        Vehicle speed, km/h.
-    t_s : ndarray, shape (K,)
-        Sample times, s (step ``dt_s``).
-    q_m : ndarray, shape (K,)
-        True vertical irregularity under the wheelset, m.
-    x_true : ndarray, shape (K, 4)
-        True state ``[ż_c, z_c, ż_w, z_w]`` (m/s, m, m/s, m).
-    y_measured : ndarray, shape (K, 2)
-        Measured ``[ż_c, z_c]`` (m/s, m): truth plus sensor noise.
-    q_measured_m : ndarray, shape (K,)
-        Irregularity given to the estimators, m (plus ``track_noise_fraction`` noise).
-    x2_initial : ndarray, shape (2,)
-        The observer's initial ``[ż_w, z_w]`` (m/s, m): truth plus ``initial_error_m`` on z_w.
-    force_true_N : ndarray, shape (K,)
-        Dynamic wheel–rail force of the plant (total minus static load), N.
-    """
-
-    speed_kmh: float
-    t_s: np.ndarray
-    q_m: np.ndarray
-    x_true: np.ndarray
-    y_measured: np.ndarray
-    q_measured_m: np.ndarray
-    x2_initial: np.ndarray
-    force_true_N: np.ndarray
-
-
 def simulate_record(vehicle, params, distance_m, profile_m, speed_kmh, salt=()) -> Record:
     """Simulate the plant on the profile at one speed and add the sensor noise.
 
     The plant starts at static equilibrium on q(0); ``plant="linear"`` is exact for q linear
     between samples, ``"hertz"`` is the nonlinear contact (RK4).  The sensor noise draws are
-    :func:`evidence.noise_draws` of ``(seed, speed, *salt)``, scaled to ``noise_fraction`` of each
+    :func:`noise_draws` of ``(seed, speed, *salt)``, scaled to ``noise_fraction`` of each
     measured channel's RMS (``track_noise_fraction`` of the RMS of q for the irregularity).
     """
     dt, duration = params["dt_s"], params["duration_s"]
     t_s, q = track.wheelset_inputs(distance_m, profile_m, speed_kmh / 3.6, [0.0], dt, duration)
     q = q[:, 0]
-    noise_y, noise_q = evidence.noise_draws(params["seed"], speed_kmh, len(t_s), salt)
+    noise_y, noise_q = noise_draws(params["seed"], speed_kmh, len(t_s), salt)
     A, B = sw.state_space(vehicle)
     x0 = np.array([0.0, q[0], 0.0, q[0]])                 # static equilibrium on q(0)
     if params["plant"] == "linear":
@@ -99,63 +69,6 @@ def simulate_record(vehicle, params, distance_m, profile_m, speed_kmh, salt=()) 
                   q_measured_m=q_meas,
                   x2_initial=x[0, 2:] + np.array([0.0, params["initial_error_m"]]),
                   force_true_N=sw.dynamic_contact_force_N(vehicle, x[:, 3], q, params["plant"]))
-
-
-@dataclass(frozen=True)
-class ObserverRun:
-    """One discrete reduced-order observer on one :class:`Record`.
-
-    Attributes
-    ----------
-    z_w_est_m : ndarray, shape (K,)
-        Estimated wheelset displacement, m.
-    force_est_N : ndarray, shape (K,)
-        Estimated dynamic wheel–rail force ``K_r (ẑ_w − q_measured)``, N.
-    convergence_time_s : float
-        First time after which ``|ẑ_w − z_w|`` stays below the threshold, s (-1: never).
-    force_rms_error_N : float
-        RMS of ``f̂ − f`` from ``error_window_start_s`` on, N.
-    displacement_rms_error_m : float
-        RMS of ``ẑ_w − z_w`` over the same window, m.
-    """
-
-    z_w_est_m: np.ndarray
-    force_est_N: np.ndarray
-    convergence_time_s: float
-    force_rms_error_N: float
-    displacement_rms_error_m: float
-
-
-@dataclass(frozen=True)
-class SpeedRun:
-    """A record at one speed with both discretisations of the paper's observer on it.
-
-    Attributes
-    ----------
-    record : Record
-        Truth and measurements.
-    z_w_rms_m, force_rms_N : float
-        RMS of the true z_w over the run (m) and of the true force over the error window (N).
-    predicted_convergence_time_s : float
-        Convergence time of the error equation alone, ``e[k+1] = Φ e[k]``, s (-1: never).
-    contact_lost_fraction : float
-        Fraction of samples where the true force would lift the wheels (total load ≤ 0).
-    paper, foh : ObserverRun
-        The observer discretised with y and q held over a step (the paper's) or linear between
-        samples.
-    """
-
-    record: Record
-    z_w_rms_m: float
-    force_rms_N: float
-    predicted_convergence_time_s: float
-    contact_lost_fraction: float
-    paper: ObserverRun
-    foh: ObserverRun
-
-    def observer(self, form: str) -> ObserverRun:
-        """The run of the observer discretised as ``form`` (``"paper"`` or ``"foh"``)."""
-        return {"paper": self.paper, "foh": self.foh}[form]
 
 
 def run_observer(observer, vehicle, record: Record, threshold_m: float,
@@ -189,3 +102,96 @@ def simulate_speed(vehicle, observers, params, distance_m, profile_m, speed_kmh,
         contact_lost_fraction=float(np.mean(force <= -vehicle.contacts * vehicle.static_wheel_load_N)),
         **{form: run_observer(obs, vehicle, record, threshold, window)
            for form, obs in observers.items()})
+
+
+def all_speeds(params: dict) -> list[float]:
+    """Speeds of the main runs then of the sweep, without repeats, km/h (the run's order)."""
+    return list(dict.fromkeys(params["speeds_kmh"] + params["sweep_speeds_kmh"]))
+
+
+def profile(params: dict, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Track profile (distance_m, irregularity_m) of one seed, long enough for every speed."""
+    length_m = max(max(all_speeds(params)) / 3.6 * params["duration_s"] + 10.0, 2 * FRA_BAND_M[1])
+    return track.synthesize_profile(
+        f"fra-{params['track_class']}", "vertical", length_m, 0.05, seed,
+        wavelength_min_m=FRA_BAND_M[0], wavelength_max_m=FRA_BAND_M[1])
+
+
+def noise_draws(seed: int, speed_kmh: float, n_samples: int, salt: tuple = ()):
+    """Standard-normal sensor draws (K, 2) on [ż_c, z_c] and (K,) on q of one run."""
+    rng = np.random.default_rng([seed, int(round(speed_kmh * 1000)), *salt])
+    return rng.standard_normal((n_samples, 2)), rng.standard_normal(n_samples)
+
+
+def _plant_batch(vehicle, plant, dt_s, q):
+    """Plant response to q (K, N) from rest on q[0]: y = [ż_c, z_c] (K, N, 2) and z_w (K, N).
+
+    ``plant="linear"``: exact for q linear between samples (FOH); ``"hertz"``: RK4 with four
+    substeps per sample and q linear between samples, as the chapter's single runs (compiled:
+    :func:`_hertz_kernel`).
+    """
+    x = np.zeros((4, q.shape[1]))
+    x[1] = x[3] = q[0]
+    out = np.empty((len(q), q.shape[1], 3))
+    out[0] = x[[0, 1, 3]].T
+    if plant == "linear":
+        Phi, G0, G1 = foh(*sw.state_space(vehicle), dt_s)
+        ga, gb = (G0 - G1)[:, :1], G1[:, :1]
+        for k in range(len(q) - 1):
+            x = Phi @ x + ga * q[k] + gb * q[k + 1]
+            out[k + 1] = x[[0, 1, 3]].T
+        return out[..., :2], out[..., 2]
+    G, P0 = vehicle.hertz_constant_m_per_N23, vehicle.static_wheel_load_N
+    _hertz_kernel(np.ascontiguousarray(q, dtype=float), dt_s / 4, 4, np.array([
+        vehicle.car_body_mass_kg, vehicle.wheelset_mass_kg, vehicle.suspension_damping_Ns_per_m,
+        vehicle.suspension_stiffness_N_per_m, G, P0, float(vehicle.contacts),
+        contact.static_compression(P0, G)]), out)
+    return out[..., :2], out[..., 2]
+
+
+@numba.njit(cache=True)
+def _hertz_derivative(x, q, c):
+    """:func:`railpaper.models.single_wheelset.nonlinear_derivative`, compiled; ``c`` = M_c, M_w,
+    C_p, K_p, G, P0, contacts, δ0."""
+    suspension = c[3] * (x[1] - x[3]) + c[2] * (x[0] - x[2])
+    delta = c[7] + x[3] - q
+    force = (max(delta, 0.0) / c[4]) ** 1.5 if delta > 0.0 else 0.0
+    dynamic_contact = c[6] * (force - c[5])
+    return np.array([-suspension / c[0], x[0], (suspension - dynamic_contact) / c[1], x[2]])
+
+
+@numba.njit(cache=True)
+def _hertz_kernel(q, h, substeps, c, out):
+    """RK4 of the Hertz plant from rest on q[0], ``substeps`` steps of h per sample, q linear
+    between samples (the operations of :func:`railpaper.experiments.reduced_order_observer.record.
+    _simulate_hertz`, per column of q); fills out[k, n] = [ż_c, z_c, z_w]."""
+    K, N = q.shape
+    for n in range(N):
+        x = np.array([0.0, q[0, n], 0.0, q[0, n]])
+        out[0, n, 0], out[0, n, 1], out[0, n, 2] = x[0], x[1], x[3]
+        for k in range(K - 1):
+            for j in range(substeps):
+                dq = q[k + 1, n] - q[k, n]
+                qa = q[k, n] + dq * (j + 0.0) / substeps
+                qm = q[k, n] + dq * (j + 0.5) / substeps
+                qb = q[k, n] + dq * (j + 1.0) / substeps
+                k1 = _hertz_derivative(x, qa, c)
+                k2 = _hertz_derivative(x + 0.5 * h * k1, qm, c)
+                k3 = _hertz_derivative(x + 0.5 * h * k2, qm, c)
+                k4 = _hertz_derivative(x + h * k3, qb, c)
+                x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            out[k + 1, n, 0], out[k + 1, n, 1], out[k + 1, n, 2] = x[0], x[1], x[3]
+
+
+def _observer_batch(observer, y, q, x2_initial):
+    """Estimated z_w (K, N) of a discrete reduced-order observer on y (K, N, 2), q (K, N)."""
+    v = np.concatenate([y, q[..., None]], axis=2)
+    drive = v[:-1] @ observer.Gamma_now.T + v[1:] @ observer.Gamma_next.T
+    w = x2_initial - y[0] @ observer.L.T
+    z = np.empty(q.shape)
+    PhiT, L = observer.Phi.T, observer.L
+    z[0] = w[:, 1]
+    for k in range(len(q) - 1):
+        w = w @ PhiT + drive[k]
+        z[k + 1] = w[:, 1]
+    return z + y @ L[1]

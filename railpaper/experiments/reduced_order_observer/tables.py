@@ -7,13 +7,13 @@ full (no truncation), wide tables transposed.
 
 from __future__ import annotations
 
-
 import numpy as np
 import pandas as pd
 
 from railpaper.data import data_path, load_quantities
-from railpaper.experiments.reduced_order_observer import evidence
 from railpaper.experiments.display import markdown, number, seconds  # noqa: F401 - re-exported
+from railpaper.experiments.reduced_order_observer import spec
+from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS
 from railpaper.models import single_wheelset as sw
 
 
@@ -49,7 +49,7 @@ def rank_table(metrics: dict) -> str:
     for name, what in (("Q0", "rank Q0 = [B AB A²B A³B] (paper: 4)"),
                        ("Q1", "rank Q1 = [C; CA; CA²; CA³] (paper: 4)"),
                        ("reduced", "rank [A12; A12·A22] (reduced pair, needs 2)")):
-        for reading in evidence.READINGS:
+        for reading in spec.READINGS:
             rows.append((what, f"P0 per {reading}", metrics[f"rank_{name}_exact_{reading}"],
                          metrics[f"rank_{name}_numpy_{reading}"],
                          metrics[f"rank_{name}_pbh_{reading}"]))
@@ -99,7 +99,7 @@ def evidence_table(metrics: dict) -> str:
     95 % order-statistic interval and the number of seeds."""
     rows = []
     for stem, what in EVIDENCE_ROWS:
-        for reading in evidence.READINGS:
+        for reading in spec.READINGS:
             k = f"{stem}_{reading}"
             if k not in metrics:                  # trends need at least two speeds
                 continue
@@ -138,7 +138,6 @@ def percent(ratio: float) -> str:
 def estimator_table(metrics: dict, params: dict) -> str:
     """RMS force error / RMS force of each estimator at the run's sensor noise: median over the
     Monte Carlo seeds with its 95 % interval, one column per speed."""
-    from railpaper.experiments.reduced_order_observer.kalman import ESTIMATORS
     rows = []
     for name, label in ESTIMATORS.items():
         row = [label]

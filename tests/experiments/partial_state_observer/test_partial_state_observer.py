@@ -10,35 +10,36 @@ import numpy as np
 import pytest
 
 from railpaper.data import read_toml
-from railpaper.experiments.partial_state_observer import experiment as ch
 from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.experiments.partial_state_observer import experiment as ch
+from railpaper.experiments.partial_state_observer.spec import SPEC
 from railpaper.pipeline.claim_rules import check_row, is_untestable
 from railpaper.pipeline.outputs import chapter_data_dir, claims, errata_table
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[3]
 SPEEDS = ("60kmh", "80kmh", "120kmh", "160kmh")
 
 
 @pytest.fixture(scope="module")
 def quick_run():
-    params = ch.SPEC.resolve({}, quick=True)
+    params = SPEC.resolve({}, quick=True)
     return params, ch.run(quick=True, **params)
 
 
 def test_spec_and_validation():
-    assert ch.SPEC.name == "partial-state-observer"
-    assert ch.SPEC.notebook == "partial_state_observer.ipynb"
-    quick = ch.SPEC.resolve({}, quick=True)
+    assert SPEC.name == "partial-state-observer"
+    assert SPEC.notebook == "partial_state_observer.ipynb"
+    quick = SPEC.resolve({}, quick=True)
     assert quick["speeds_kmh"] == [60.0, 80.0, 120.0, 160.0] and quick["duration_s"] >= 2.0
-    assert quick["n_seeds"] >= 5 and ch.SPEC.resolve({})["n_seeds"] >= 20
-    assert ch.SPEC.resolve({})["suspension_reading"] == "labels"
+    assert quick["n_seeds"] >= 5 and SPEC.resolve({})["n_seeds"] >= 20
+    assert SPEC.resolve({})["suspension_reading"] == "labels"
     for bad in ({"beta": 1.0}, {"error_window_start_s": 9.0}, {"dt_s": 0.01},
                 {"wavelength_min_m": 400.0}, {"speeds_kmh": [60.0, 60.0]},
                 {"suspension_reading": "swapped"}, {"n_seeds": 1000}):
         with pytest.raises(ParameterError):
-            ch.run(quick=True, **ch.SPEC.resolve(bad, quick=True))
+            ch.run(quick=True, **SPEC.resolve(bad, quick=True))
     with pytest.raises(ParameterError):
-        ch.SPEC.resolve({"alpha": 3.0})
+        SPEC.resolve({"alpha": 3.0})
 
 
 def test_metric_keys_and_timeseries(quick_run):
@@ -109,7 +110,7 @@ def test_independent_expectations(quick_run):
 
 
 def test_deterministic():
-    params = ch.SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 2, "alpha_sweep_per_s": [20.0]},
+    params = SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 2, "alpha_sweep_per_s": [20.0]},
                              quick=True)
     a, b = ch.run(quick=True, **params), ch.run(quick=True, **params)
     assert json.dumps(a.metrics, sort_keys=True) == json.dumps(b.metrics, sort_keys=True)

@@ -9,9 +9,11 @@ from scipy import stats as st
 from railpaper.data import data_path, load_quantities, values
 from railpaper.discretise import foh, simulate_foh
 from railpaper.estimators import kalman_baseline as kb
-from railpaper.experiments.partial_state_observer import experiment as ch
 from railpaper.experiments.partial_state_observer import evidence as ev
+from railpaper.experiments.partial_state_observer import experiment as ch
+from railpaper.experiments.partial_state_observer.spec import SPEC
 from railpaper.models import vertical_10dof as v10
+from railpaper.settling import settling_time_s
 
 
 def brute_settle(t, err, thr):
@@ -29,7 +31,7 @@ def test_settle_times_match_brute_force():
     err[1, 2, -1, 0] = 9.0                                    # fails at the last sample
     err[2, 0] = 0.0                                           # always below: settles at t = 0
     thr = np.abs(rng.standard_normal((4, 3, 2))) * 0.05 + 0.01
-    got = ev.settle_times_s(t, err, thr)
+    got = settling_time_s(t, np.all(np.abs(err) < thr[..., None, :], axis=-1), axis=-1)
     for i in range(4):
         for j in range(3):
             assert got[i, j] == brute_settle(t, err[i, j], thr[i, j])
@@ -133,7 +135,7 @@ def test_readings_of_table1():
 
 
 def test_batched_simulators_match_single_runs():
-    p = ch.SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
+    p = SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
     ctx = ch._Context(p, "symbols")
     t_s, q_in, fixed = ch.track_inputs(ctx, p, [4, 5], [60.0, 120.0], 310.0)
     assert q_in.shape[:2] == (2, 2) and fixed.shape == (2,)
@@ -161,7 +163,7 @@ def test_batched_simulators_match_single_runs():
 
 @pytest.mark.parametrize("reading", ev.READINGS)
 def test_hb0_poles_at_primary_corner_in_both_readings(reading):
-    p = ch.SPEC.resolve({}, quick=True)
+    p = SPEC.resolve({}, quick=True)
     ctx = ch._Context(p, reading, kalman=False)
     v = v10.load_parameters(**ev.suspension(reading))
     np.testing.assert_allclose(ctx.hb0.poles.real,

@@ -3,10 +3,10 @@
 import json
 import re
 
-from railpaper.experiments.partial_state_observer import experiment as ch
+from railpaper.experiments.partial_state_observer.spec import SPEC
 from railpaper.paths import BOOK_DIR
 
-NOTEBOOK = BOOK_DIR / "notebooks" / ch.SPEC.notebook
+NOTEBOOK = BOOK_DIR / "notebooks" / SPEC.notebook
 
 
 def _cells():
@@ -15,7 +15,7 @@ def _cells():
 
 def test_title_equals_spec_title_and_claims_glued_once():
     cells = _cells()
-    assert "".join(cells[0]["source"]).splitlines()[0] == f"# {ch.SPEC.title}"
+    assert "".join(cells[0]["source"]).splitlines()[0] == f"# {SPEC.title}"
     text = "".join("".join(c["source"]) for c in cells)
     assert text.count("{glue:md} claims_table") == 1
     assert text.count('glue("claims_table"') == 1

@@ -11,9 +11,9 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from railpaper.experiments.quasi_gaussian_rbpf import experiment as chapter
-from railpaper.experiments.quasi_gaussian_rbpf import evidence as ev
 from railpaper.experiments.quasi_gaussian_rbpf import computing_time as tm
+from railpaper.experiments.quasi_gaussian_rbpf import evidence as ev
+from railpaper.experiments.quasi_gaussian_rbpf import experiment as chapter
 
 TRUTH = {"a": -0.7, "b": 1.5}
 

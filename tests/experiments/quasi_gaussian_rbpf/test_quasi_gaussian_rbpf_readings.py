@@ -5,8 +5,9 @@ import pytest
 
 from railpaper.engine.grid_posterior import grid_posterior
 from railpaper.experiments.quasi_gaussian_rbpf import readings as R
+from railpaper.experiments.quasi_gaussian_rbpf import tables
 from railpaper.models.linear_toys import paper004_system
-from railpaper.settling import settling_step_to_final
+from railpaper.settling import settling_step
 
 
 def brute_settling(x, tol):
@@ -18,10 +19,10 @@ def brute_settling(x, tol):
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_settling_step_to_final_matches_brute_force(seed):
+def test_settling_to_the_final_value_matches_brute_force(seed):
     x = np.cumsum(np.random.default_rng(seed).normal(size=40)) * 0.1
     for tol in (0.0, 0.05, 0.3, 10.0):
-        assert settling_step_to_final(x, tol) == brute_settling(list(x), tol)
+        assert settling_step(np.abs(x - x[-1]) <= tol) == brute_settling(list(x), tol)
 
 
 def test_readings_file_has_units_and_sources():
@@ -68,7 +69,7 @@ def test_readings_table_is_a_well_formed_markdown_table(tmp_path):
     path = tmp_path / "readings.toml"
     path.write_text('[one]\nlabel = "x"\nq_var = 0.001\nr_var = 0.001\np0_std = 0.05\n'
                     'source = "test"\n[horizons]\nvalues = [12, 60]\n')
-    table = R.readings_table(R.run_readings(n_records=3, grid_size=9, path=path))
+    table = tables.readings_table(R.run_readings(n_records=3, grid_size=9, path=path))
     rows = table.splitlines()
     assert len(rows) == 3 and set(rows[1]) <= set("|-")
     widths = {row.count("|") for row in rows}

@@ -5,17 +5,18 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-
 from conftest import railpaper_cli
 
 from railpaper.data import read_toml
-
-from railpaper.paths import DATA_DIR
-from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.base import ParameterError, check_metrics
 from railpaper.engine.rbpf import run_rbpf
+from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
+from railpaper.experiments.rbpf_parameter_estimation import measurements
 from railpaper.models import lateral_16state as L
+from railpaper.paths import DATA_DIR
 from railpaper.pipeline.claim_rules import is_untestable, rule_metrics
+from railpaper.settling import settling_step
 
 PARAMS = ("csy", "lambda", "kpy", "ksy", "csaly")
 REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme",
@@ -103,7 +104,7 @@ def test_notebook_refuses_toy_only_run(tmp_path):
 
 def test_steps_to_within():
     norm = np.array([[1.2, 1.0], [1.01, 1.1], [0.99, 1.0], [1.0, 1.2]])
-    np.testing.assert_array_equal(chapter.steps_to_within(norm), [2, -1])
+    np.testing.assert_array_equal(settling_step(np.abs(norm - 1.0) <= 0.05), [2, -1])
 
 
 def test_non_physical_parameters_raise_one_line():
@@ -120,31 +121,19 @@ def test_measurements_csv_validation(tmp_path):
     bad = tmp_path / "bad.csv"
     pd.DataFrame({"t_s": np.arange(20) * 1e-3, "acc_w1_mps2": 0.0}).to_csv(bad, index=False)
     with pytest.raises(ParameterError, match="missing column"):
-        chapter.read_measurements(str(bad), params)
+        measurements.read_measurements(str(bad), params)
     good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in L.CHANNELS}})
     good.to_csv(tmp_path / "step.csv", index=False)
     with pytest.raises(ParameterError, match="dt_s"):
-        chapter.read_measurements(str(tmp_path / "step.csv"), params)
+        measurements.read_measurements(str(tmp_path / "step.csv"), params)
     good["t_s"] = np.arange(20) * 1e-3
     good.to_csv(tmp_path / "ok.csv", index=False)
-    rec = chapter.read_measurements(str(tmp_path / "ok.csv"), params)
+    rec = measurements.read_measurements(str(tmp_path / "ok.csv"), params)
     assert rec.y.shape == (20, 5) and rec.u_mps is None and rec.seed is None
 
 
-def test_one_thread_restores_the_thread_counts():
-    import numba
-
-    from railpaper.experiments.rbpf_parameter_estimation.measurements import _openblas_handles, one_thread
-
-    before = numba.get_num_threads(), [get() for _, get in _openblas_handles()]
-    with one_thread():
-        assert numba.get_num_threads() == 1
-        assert all(get() == 1 for _, get in _openblas_handles())
-    assert (numba.get_num_threads(), [get() for _, get in _openblas_handles()]) == before
-
-
 def test_lateral_rbpf_survives_degenerate_weights():
-    fixed, theta = chapter.vehicle()
+    fixed, theta = study.vehicle()
     system = L.lateral_system(fixed, 300 / 3.6, 1e-3, 1e-12 * np.eye(16), 1e-6 * np.eye(5))
     rng = np.random.default_rng(0)
     y = np.full((30, 5), 1e6)                     # impossible data: every weight underflows
@@ -165,7 +154,7 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
     """The named fields are what the pipeline writes and what the metrics were computed from:
     the time series, the per-parameter steps (against a written-out loop), the EKF count and
     guesses per record, and the illustrated record filtered by hand with the estimator."""
-    from railpaper.experiments.rbpf_parameter_estimation.measurements import one_thread
+    from railpaper.threads import one_thread
 
     params, result = quick_result
     lat, m = result.lateral, result.metrics
@@ -184,11 +173,11 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
     assert lat.ekf_converged_count == sum(within) == m["ekf_lateral_converged_count"]
     assert list(lat.crlb.parameter) == list(PARAMS)
     np.testing.assert_array_equal(lat.crlb.known_350, [m[f"crlb_rel_350_{p}"] for p in PARAMS])
-    fixed, theta = chapter.vehicle()
+    fixed, theta = study.vehicle()
     np.testing.assert_array_equal(lat.theta_true, theta)
     with one_thread():                                  # the run's thread settings
-        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
-        Q, R = chapter.filter_noise(fixed, theta, params, record.du_var_m2ps2)
+        record = study.simulate_lateral(params, fixed, theta, params["seed"])
+        Q, R = study.filter_noise(fixed, theta, params, record.du_var_m2ps2)
         rng = np.random.default_rng([params["seed"], 11])   # documented: prior, then the filter
         theta0 = theta * rng.uniform(params["prior_low"], params["prior_high"], (200, 5))
         run = run_rbpf(L.lateral_system(fixed, params["speed_kmh"] / 3.6, params["dt_s"], Q, R),
@@ -206,7 +195,7 @@ def test_user_record_input_is_held_one_step(tmp_path):
     frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in L.CHANNELS}, "ydot_t1_mps": u1,
                           "ydot_t2_mps": u2})
     frame.to_csv(tmp_path / "u.csv", index=False)
-    rec = chapter.read_measurements(str(tmp_path / "u.csv"), params)
+    rec = measurements.read_measurements(str(tmp_path / "u.csv"), params)
     np.testing.assert_array_equal(rec.u_mps[1:], np.column_stack([u1, u2])[:-1])
     np.testing.assert_array_equal(rec.u_mps[0], [u1[0], u2[0]])
     np.testing.assert_allclose(rec.du_var_m2ps2, [np.var(np.diff(u1)), np.var(np.diff(u2))],
@@ -265,19 +254,19 @@ def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_r
     computation: Bernstein-von Mises, flat prior) within the sampler's error, and the RBPF's
     stored spreads are run_rbpf's theta_std."""
     from railpaper.engine.ibis import run_ibis
-    from railpaper.experiments.rbpf_parameter_estimation.measurements import one_thread
+    from railpaper.threads import one_thread
 
     params, result = quick_result
     lat = result.lateral
-    fixed, theta = chapter.vehicle()
+    fixed, theta = study.vehicle()
     with one_thread():
-        record = chapter.simulate_lateral(params, fixed, theta, params["seed"])
-        system = chapter.filter_system(params, fixed, theta, record)
+        record = study.simulate_lateral(params, fixed, theta, params["seed"])
+        system = study.filter_system(params, fixed, theta, record)
         run = run_ibis(system, record.y, params["prior_low"] * theta,
                        params["prior_high"] * theta, np.zeros(16), 1e-10 * np.eye(16),
                        np.random.default_rng([params["seed"], 17]), u=record.u_mps,
                        n_particles=params["ibis_particles"], proposal="independent")
-        paper = chapter.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
+        paper = study.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
     post = lat.illustrated.posterior
     np.testing.assert_array_equal(post.mean, run.mean / theta)
     np.testing.assert_array_equal(post.q95, run.q95 / theta)

@@ -4,6 +4,7 @@ equals run_mismatch's own filtering of those records, and the paired counts equa
 import numpy as np
 
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.mismatch import run_mismatch
 
 
@@ -20,7 +21,7 @@ def test_matched_metrics_from_part_two_equal_run_mismatch():
     for r in result.lateral.runs:                           # Part 2's record = the matched one
         np.testing.assert_array_equal(direct.rbpf["matched"][r.seed - params["seed"]],
                                       r.rbpf_working_norm)
-        assert rows.loc[("matched", r.seed), "ekf_converged"] == chapter.ekf_converged(
+        assert rows.loc[("matched", r.seed), "ekf_converged"] == study.ekf_converged(
             r.ekf_norm[0])
     lost = sum(rows.loc[("matched", s), "rbpf_all_within"]
                and not rows.loc[("mismatch", s), "rbpf_all_within"] for s in (0, 1))

@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.rbpf_parameter_estimation import posterior as exact
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.experiments.rbpf_parameter_estimation.result import steps_reported
 from railpaper.pipeline.outputs import write_outputs
 
 G = np.array([-1.0, -1.3])          # Eq. (18)'s noise input, as printed
@@ -140,7 +140,7 @@ def test_toy_coverage_table_and_metrics_count_by_hand(toy_files):
 
 
 def test_steps_reported():
-    assert exact.steps_reported(500) == [100, 350, 500]
-    assert exact.steps_reported(1000) == [100, 350, 1000]
-    assert exact.steps_reported(2000) == [100, 350, 1000, 2000]
-    assert exact.steps_reported(200) == [100, 200]
+    assert steps_reported(500) == [100, 350, 500]
+    assert steps_reported(1000) == [100, 350, 1000]
+    assert steps_reported(2000) == [100, 350, 1000, 2000]
+    assert steps_reported(200) == [100, 200]

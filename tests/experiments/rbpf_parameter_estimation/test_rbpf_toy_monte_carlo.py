@@ -8,6 +8,9 @@ import pytest
 from scipy import stats as st
 
 from railpaper.experiments.rbpf_parameter_estimation import evidence as mc
+from railpaper.experiments.rbpf_parameter_estimation import lateral as study
+from railpaper.settling import holds_from, settling_step
+from railpaper.stats import max_abs_bias, rate
 
 
 def _settle_by_loop(err, tol):
@@ -24,28 +27,28 @@ def test_settle_step_matches_a_loop(seed):
     if seed == 0:
         err[-1] = np.nan                            # NaN counts as outside
     for tol in (0.05, 0.3, 1.0, 10.0):
-        assert mc.settle_step(err, tol) == _settle_by_loop(
+        assert settling_step(err <= tol, never=len(err) + 1) == _settle_by_loop(
             np.where(np.isnan(err), np.inf, err), tol)
-    assert mc.settle_step(np.zeros(5), 0.1) == 1
-    assert mc.settle_step(np.array([0.0, 0.0, 1.0]), 0.1) == 4     # never: K + 1
+    assert settling_step(np.zeros(5) <= 0.1, never=6) == 1
+    assert settling_step(np.array([0.0, 0.0, 1.0]) <= 0.1, never=4) == 4     # never: K + 1
 
 
 def test_within_from_checks_every_step_from_start():
     norm = np.ones((10, 2))
     norm[4, 1] = 1.06                               # step 5 outside
-    assert not mc.within_from(norm, 5, 0.05)
-    assert mc.within_from(norm, 6, 0.05)
-    assert mc.within_from(norm, 5, 0.07)
+    assert not holds_from(np.abs(norm - 1.0) <= 0.05, 5).all()
+    assert holds_from(np.abs(norm - 1.0) <= 0.05, 6).all()
+    assert holds_from(np.abs(norm - 1.0) <= 0.07, 5).all()
     norm[9, 0] = np.nan
-    assert not mc.within_from(norm, 6, 0.05)
+    assert not holds_from(np.abs(norm - 1.0) <= 0.05, 6).all()
     with pytest.raises(ValueError, match="outside the record"):
-        mc.within_from(norm, 11, 0.05)
+        holds_from(np.abs(norm - 1.0) <= 0.05, 11).all()
 
 
 @pytest.mark.parametrize("k, n", [(0, 20), (3, 20), (19, 20), (20, 20), (2, 6)])
 def test_rate_is_clopper_pearson(k, n):
     hits = np.r_[np.ones(k, bool), np.zeros(n - k, bool)]
-    est = mc.rate(hits)
+    est = rate(hits)
     ref = st.binomtest(k, n).proportion_ci(confidence_level=0.95, method="exact")
     assert (est.value, est.n) == (k / n, n)
     assert est.low == pytest.approx(ref.low, abs=1e-12)
@@ -55,7 +58,7 @@ def test_rate_is_clopper_pearson(k, n):
 def test_max_abs_bias_is_bonferroni_t_by_hand():
     rng = np.random.default_rng(3)
     x = rng.normal([0.0, 0.08, -0.02], [0.01, 0.02, 0.05], size=(20, 3))
-    est = mc.max_abs_bias(x)
+    est = max_abs_bias(x)
     lows, highs = [], []
     for col in x.T:                                 # scipy's t interval at 1 - 0.05/3
         lo, hi = st.t.interval(1 - 0.05 / 3, len(col) - 1, loc=col.mean(), scale=st.sem(col))
@@ -69,12 +72,12 @@ def test_max_abs_bias_is_bonferroni_t_by_hand():
     assert est.n == 20 and est.low <= est.value <= est.high
     assert est.low > 0.05                           # column 1's bias of 8 % is resolved
     with pytest.raises(ValueError, match="n >= 2"):
-        mc.max_abs_bias(x[:1])
+        max_abs_bias(x[:1])
 
 
 def test_max_abs_bias_covers_zero_bias_when_there_is_none():
     x = np.random.default_rng(0).normal(0, 0.01, size=(30, 5))
-    assert mc.max_abs_bias(x).low == 0.0
+    assert max_abs_bias(x).low == 0.0
 
 
 def _toy_table():
@@ -125,7 +128,7 @@ def test_lateral_metrics_by_hand():
         r[:349] = 1.5                               # outside 5 % until step 349
         runs.append(r)
     runs[2][360, 4] = 0.9                           # record 2 leaves the band after step 350
-    m = mc.lateral_metrics(runs, "_x")
+    m = study.lateral_metrics(runs, "_x")
     assert m["lateral_within_5pct_from_350_rate_x"] == pytest.approx(1 / 3)   # record 0 only
     assert m["lateral_within_5pct_at_350_rate_x"] == pytest.approx(2 / 3)     # not record 1
     assert m["lateral_within_5pct_from_350_rate_x_n"] == 3
@@ -148,8 +151,8 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
     """run_toy: record i draws from default_rng(seed + i) the simulation, then per initial
     condition the prior, the paper RBPF, the working RBPF (same particles) and the EKF; each
     row's final errors, flags and settle steps recomputed here from the estimators directly."""
-    from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
     from railpaper.engine.rbpf import run_rbpf
+    from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
     from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
     from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy
     from railpaper.models.linear_toys import EQ18_G, eq18_system, simulate_eq18

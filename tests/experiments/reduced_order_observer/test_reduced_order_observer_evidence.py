@@ -11,8 +11,10 @@ from scipy import stats as st
 
 from railpaper.discretise import foh, simulate_foh
 from railpaper.estimators import reduced_order_observer as roo
-from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import evidence as ev
+from railpaper.experiments.reduced_order_observer import experiment as chapter
+from railpaper.experiments.reduced_order_observer import record
+from railpaper.experiments.reduced_order_observer.spec import SPEC
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settled_index
 
@@ -22,7 +24,7 @@ SMALL = {"speeds_kmh": [60.0, 100.0], "sweep_speeds_kmh": [40.0, 100.0, 160.0], 
 
 @pytest.fixture(scope="module")
 def small():
-    params = chapter.SPEC.resolve(SMALL, quick=True)
+    params = SPEC.resolve(SMALL, quick=True)
     return params, ev.monte_carlo(params)
 
 
@@ -34,7 +36,7 @@ def test_settled_indices_match_scalar_definition():
     ok[:, 2] = False
     ok[-1, 2] = True                     # holds only at the last sample
     expected = [settled_index(ok[:, j]) for j in range(ok.shape[1])]
-    assert ev.settled_indices(ok).tolist() == expected
+    assert settled_index(ok).tolist() == expected
     assert expected[:3] == [0, -1, 49]
 
 
@@ -59,7 +61,7 @@ def test_exact_ctrb_equals_control_on_integers():
 
 
 def test_structure_metrics():
-    m = ev.structure_metrics(chapter.SPEC.resolve({}))
+    m = ev.structure_metrics(SPEC.resolve({}))
     for r in ev.READINGS:
         assert m[f"rank_Q0_exact_{r}"] == m[f"rank_Q1_exact_{r}"] == 4
         assert m[f"rank_reduced_exact_{r}"] == 2
@@ -82,18 +84,18 @@ def test_batched_plant_and_observer_equal_single_runs(reading):
     A, B = sw.state_space(vehicle)
     dt, t = 1e-4, np.arange(0, 0.2, 1e-4)
     q = np.column_stack([1e-3 * np.sin(2 * np.pi * f * t) + c for f, c in ((3, 0), (17, 2e-4))])
-    y, z_w = ev._plant_batch(vehicle, "linear", dt, q)
+    y, z_w = record._plant_batch(vehicle, "linear", dt, q)
     obs = roo.design(A, B, 2, [-30.0, -40.0]).discretise(dt, "zoh")
     x2_initial = np.column_stack([np.zeros(2), q[0] + 5e-3])
-    z_est = ev._observer_batch(obs, y, q, x2_initial)
+    z_est = record._observer_batch(obs, y, q, x2_initial)
     for j in range(2):
         x = simulate_foh(*foh(A, B, dt), q[:, j:j + 1], [0.0, q[0, j], 0.0, q[0, j]])
         np.testing.assert_allclose(y[:, j], x[:, :2], rtol=1e-10, atol=1e-16)
         np.testing.assert_allclose(z_w[:, j], x[:, 3], rtol=1e-10, atol=1e-16)
         single = obs.run(x[:, :2], q[:, j:j + 1], x2_initial[j])[:, 1]
         np.testing.assert_allclose(z_est[:, j], single, rtol=1e-9, atol=1e-15)
-    yh, zh = ev._plant_batch(vehicle, "hertz", dt, q[:300])
-    xh = chapter._simulate_hertz(vehicle, t[:300], q[:300, 1], [0.0, q[0, 1], 0.0, q[0, 1]])
+    yh, zh = record._plant_batch(vehicle, "hertz", dt, q[:300])
+    xh = record._simulate_hertz(vehicle, t[:300], q[:300, 1], [0.0, q[0, 1], 0.0, q[0, 1]])
     np.testing.assert_allclose(zh[:, 1], xh[:, 3], rtol=1e-10, atol=1e-16)
 
 
@@ -148,7 +150,7 @@ def test_evidence_metrics_recomputed_by_hand(small):
 
 
 def test_never_converged_counts_as_duration():
-    params = chapter.SPEC.resolve(dict(SMALL, sweep_speeds_kmh=[100.0]), quick=True)
+    params = SPEC.resolve(dict(SMALL, sweep_speeds_kmh=[100.0]), quick=True)
     rows = []
     for seed in range(3):
         for speed, conv in ((60.0, 0.1), (100.0, -1.0 if seed == 0 else 0.2)):

@@ -12,6 +12,8 @@ from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
 from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import kalman as rk
+from railpaper.experiments.reduced_order_observer import record as simulation
+from railpaper.experiments.reduced_order_observer.spec import SPEC
 from railpaper.models import single_wheelset as sw
 
 
@@ -100,7 +102,7 @@ def test_batch_of_models_equals_one_at_a_time(toy):
 
 @pytest.fixture(scope="module")
 def small():
-    params = chapter.SPEC.resolve(dict(duration_s=0.6, error_window_start_s=0.3, mc_seeds=4,
+    params = SPEC.resolve(dict(duration_s=0.6, error_window_start_s=0.3, mc_seeds=4,
                                        sweep_speeds_kmh=[60.0, 100.0]), quick=True)
     return params, rk.compare(params)
 
@@ -128,7 +130,7 @@ def test_chapter_record_against_filterpy(small):
     model = rk.kalman_model(A, B, comparison.shaping[60.0], params["dt_s"])
     R, P0 = rk.filter_covariances(model, [(params["noise_fraction"], 0.0)], params)
     distance, profile = chapter.evidence.profile(params, params["seed"])
-    record = chapter.simulate_record(vehicle, params, distance, profile, 60.0)
+    record = simulation.simulate_record(vehicle, params, distance, profile, 60.0)
     z = np.column_stack([record.y_measured, record.q_measured_m])
     x0 = np.r_[z[0, :2], record.x2_initial, z[0, 2], 0.0]
     means, _, smoothed = _filterpy(model.F, model.Q, model.H, R[0], P0, x0, z)

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from railpaper.experiments.reduced_order_observer import experiment as chapter
-from railpaper.experiments.reduced_order_observer import figures
-from railpaper.experiments.reduced_order_observer import tables
+from railpaper.experiments.reduced_order_observer import figures, tables
+from railpaper.experiments.reduced_order_observer.spec import SPEC
 from railpaper.pipeline.outputs import errata_table
 
 matplotlib.use("Agg")
@@ -19,7 +19,7 @@ SMALL = dict(duration_s=0.6, error_window_start_s=0.3, sweep_speeds_kmh=[60.0, 1
 
 @pytest.fixture(scope="module")
 def small():
-    params = chapter.SPEC.resolve(SMALL, quick=True)
+    params = SPEC.resolve(SMALL, quick=True)
     return params, chapter.run(**params)
 
 
@@ -66,7 +66,7 @@ def test_tables_render(small):
     for text in (tables.evidence_table(result.metrics), tables.rank_table(result.metrics),
                  tables.noise_table(result.noise_sweep), tables.plant_table(result.plant_comparison),
                  tables.parameter_table({"wheel": result.vehicle}),
-                 tables.errata_table(errata_table(chapter.SPEC.name))):
+                 tables.errata_table(errata_table(SPEC.name))):
         assert "…" not in text and "nan" not in text.lower() and "dtype" not in text
     assert "| E1 |" in tables.errata_table(pd.DataFrame({"location": ["x"]}))
 
