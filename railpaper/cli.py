@@ -148,7 +148,7 @@ def cmd_bands(args) -> int:
 
 def cmd_build(args) -> int:
     from railpaper.pipeline.book import build_book
-    html = build_book(args.quick, args.book_dir)
+    html = build_book(args.quick, args.book_dir, progress=sys.stderr.isatty())
     print(f"railpaper: book built at {html / 'index.html'}")
     return 0
 

@@ -106,12 +106,12 @@ def time_filter(prob: dict, kind: str, N: int, n_steps: int, per_step: bool = Fa
     Y, U = prob["y"][skip:skip + n_steps], prob["u"][skip:skip + n_steps]
     t0 = time.perf_counter()
     if hasattr(filt, "steps") and not per_step:
-        est = np.array([o["theta_mean"] for o in filt.steps(Y, U)])
+        est = np.array([o.theta_mean for o in filt.steps(Y, U)])
     else:
         est = np.empty((n_steps, 5))
         for k in range(n_steps):
             out = filt.step(Y[k], U[k])
-            est[k] = out if isinstance(out, np.ndarray) else out["theta_mean"]
+            est[k] = out if isinstance(out, np.ndarray) else out.theta_mean
     return (time.perf_counter() - t0) / n_steps, est
 
 
@@ -128,7 +128,7 @@ def working_timeline(prob: dict, N: int, skip: int, steps: int) -> tuple[float, 
     t0 = time.perf_counter()
     filt.steps(Y[skip:skip + steps], U[skip:skip + steps])
     settled = (time.perf_counter() - t0) / steps
-    return first, settled, int(sum(o["resampled"] for o in outputs))
+    return first, settled, int(sum(o.resampled for o in outputs))
 
 
 def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, int, int]:

@@ -1,1 +1,50 @@
-"""TODO"""
+"""The batched linear-Gaussian engine: Kalman filters of many models at once, and the
+parameter samplers built on them.
+
+A model is a callable ``system(theta) -> LinearGaussianBatch`` (:class:`LinearGaussianSystem`):
+given N parameter vectors it returns their matrices.  Everything below takes such a callable and
+never a vehicle, so the same code runs paper 004's toy and paper 003's 16-state lateral model::
+
+    >>> import numpy as np
+    >>> from railpaper.engine import LinearGaussianBatch, grid_posterior, run_rbpf
+    >>> def system(theta):                    # x_k = a x_(k-1) + w,  y_k = x_k + e;  θ = (a,)
+    ...     return LinearGaussianBatch(F=theta[:, :, None], Q=[[0.1]], H=[[1.0]], R=[[0.5]])
+    >>> rng = np.random.default_rng(0)
+    >>> x = np.zeros(301)
+    >>> for k in range(1, 301):
+    ...     x[k] = 0.8 * x[k - 1] + rng.normal(0, 0.1 ** 0.5)
+    >>> y = (x[1:] + rng.normal(0, 0.5 ** 0.5, 300))[:, None]
+    >>> rbpf = run_rbpf(system, y, rng.uniform(0, 1, (400, 1)), np.zeros(1), np.eye(1), rng)
+    >>> exact = grid_posterior(system, y, [0.0], [1.0], 401, np.zeros(1), np.eye(1))
+    >>> bool(abs(rbpf.theta_mean[-1, 0] - exact.mean[-1, 0]) < 2 * exact.std[-1, 0])
+    True
+
+``run_rbpf`` is paper 003's Rao–Blackwellised particle filter (a Kalman filter per parameter
+particle, Liu–West moves); ``grid_posterior`` the exact posterior of a low-dimensional θ on a
+grid; ``run_ibis`` the exact posterior of any θ by IBIS; ``run_qgrbpf`` paper 004's
+quasi-Gaussian RBPF.  The parts: :mod:`~railpaper.engine.kalman` (the numpy reference step,
+Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank of N filters),
+:mod:`~railpaper.engine.batch_expm` and :mod:`~railpaper.engine.sparse_zoh` (exact ZOH of stacks
+of models), :mod:`~railpaper.engine.particles` (weights, resampling, Liu–West),
+:mod:`~railpaper.engine.mcmc` (adaptive Metropolis on the Kalman likelihood) and
+:mod:`~railpaper.engine.crlb` (Fisher information, Cramér–Rao bound).
+"""
+
+from railpaper.engine.crlb import crlb_std, fisher_information
+from railpaper.engine.grid_posterior import GridPosterior, grid_posterior
+from railpaper.engine.ibis import IBISRun, run_ibis
+from railpaper.engine.kalman import predict, update
+from railpaper.engine.kalman_bank import kalman_run, kalman_step
+from railpaper.engine.linear_gaussian import LinearGaussianBatch, LinearGaussianSystem
+from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
+from railpaper.engine.particles import liu_west_move, normalise_log_weights, systematic_resample
+from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
+from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, run_filter,
+                                   run_rbpf)
+
+__all__ = ["FilterRun", "GridPosterior", "IBISRun", "LinearGaussianBatch",
+           "LinearGaussianSystem", "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate",
+           "adaptive_metropolis", "crlb_std", "fisher_information", "grid_posterior",
+           "kalman_log_posterior", "kalman_run", "kalman_step", "liu_west_move",
+           "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf",
+           "run_rbpf", "systematic_resample", "update"]

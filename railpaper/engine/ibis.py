@@ -51,12 +51,11 @@ from typing import Callable
 
 import numpy as np
 
-from railpaper.engine.ibis_parts import (append_summaries, jittered_cholesky, merge_systems,
-                                             normalise_log_weight_columns)
 from railpaper.engine.kalman_bank import kalman_run
-from railpaper.engine.particles import (gaussian_log_density, systematic_resample,
-                                            weighted_mean_cov)
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.linear_gaussian import LinearGaussianBatch, merge_systems
+from railpaper.engine.particles import (gaussian_log_density, normalise_log_weight_columns,
+                                        systematic_resample, weighted_mean_cov,
+                                        weighted_quantiles)
 
 PROPOSALS = ("rw", "independent")
 
@@ -350,3 +349,29 @@ def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
                    n_loglik_evals=s.n_evals, n_filter_steps=s.n_steps_run, theta=s.theta.copy(),
                    weights=w_final / w_final.sum(), loglik=s.loglik.copy(), lower=lower,
                    upper=upper)
+
+
+def jittered_cholesky(cov: np.ndarray, box_width: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor of Σ; if Σ is singular (e.g. one distinct particle), of Σ plus the
+    smallest diagonal jitter (10⁻⁹, 10⁻⁸, … × box width)² that factorises."""
+    jitter = 0.0
+    for _ in range(8):
+        try:
+            return np.linalg.cholesky(cov + np.diag(jitter * box_width ** 2))
+        except np.linalg.LinAlgError:
+            jitter = 1e-18 if jitter == 0.0 else 100.0 * jitter
+    return np.diag(1e-3 * box_width)
+
+
+def append_summaries(rows: dict, theta, W, log_norm, prev_log_norm, ess) -> None:
+    """Append per-step mean, sd, quantiles, ESS and incremental log evidence (W: (J, N))."""
+    mean = W @ theta                                                # (J, d)
+    centred = theta[None] - mean[:, None]                           # (J, N, d)
+    var = np.einsum("jn,jnd->jd", W, centred * centred)
+    q = weighted_quantiles(theta, W, (0.05, 0.95))
+    rows["mean"].extend(mean)
+    rows["sd"].extend(np.sqrt(np.clip(var, 0.0, None)))
+    rows["q05"].extend(q[0])
+    rows["q95"].extend(q[1])
+    rows["ess"].extend(ess)
+    rows["log_evidence"].extend(log_norm - prev_log_norm)

@@ -1,11 +1,14 @@
-"""The container of N linear-Gaussian state-space models, shared by models and estimators.
+"""The container of N linear-Gaussian state-space models, and the model interface of the engine.
 
 Models build it (:mod:`railpaper.models.linear_toys`, :mod:`railpaper.models.lateral_16state`)
-and estimators consume it (:mod:`railpaper.engine.kalman_bank`, ``rbpf``, ``qgrbpf``,
-``crlb``), so it lives below both layers: neither imports the other.
+and the engine consumes it (:mod:`railpaper.engine.kalman_bank`, ``rbpf``, ``qgrbpf``,
+``ibis``, ``crlb``): a parameter filter sees a model only as a :class:`LinearGaussianSystem`,
+a callable from a batch of parameter vectors to their matrices.
 """
 
 from __future__ import annotations
+
+from typing import Protocol
 
 import numpy as np
 
@@ -46,3 +49,32 @@ class LinearGaussianBatch:
             return M if M is None or M.ndim < 3 else M[indices]
         return LinearGaussianBatch(pick(self.F), pick(self.Q), pick(self.H), pick(self.R),
                                    pick(self.B))
+
+
+def merge_systems(old: LinearGaussianBatch, new: LinearGaussianBatch, take_new: np.ndarray
+                  ) -> LinearGaussianBatch:
+    """Per-model matrices: ``new``'s where ``take_new`` (N,) is True, else ``old``'s."""
+    n = take_new.shape[0]
+
+    def pick(a, b):
+        if a is None:
+            return None
+        if a.ndim == 2 and b.ndim == 2 and np.array_equal(a, b):
+            return a                                                      # shared, unchanged
+        a = np.broadcast_to(a, (n,) + a.shape[-2:])
+        b = np.broadcast_to(b, (n,) + b.shape[-2:])
+        return np.where(take_new[:, None, None], b, a)
+    return LinearGaussianBatch(*(pick(getattr(old, k), getattr(new, k))
+                                 for k in ("F", "Q", "H", "R", "B")))
+
+
+class LinearGaussianSystem(Protocol):
+    """A model as the engine sees it: ``system(theta)`` gives the matrices of N models.
+
+    ``theta`` is an (N, d) array of parameter vectors (the particles, the grid points); the
+    result holds per-model matrices (leading axis N) where they depend on θ and shared ones
+    where they do not.  Paper 004's toy, paper 003's Eq. (18) toy and paper 003's lateral
+    vehicle (whose ``system`` discretises A(θ) per particle) all have this form.
+    """
+
+    def __call__(self, theta: np.ndarray) -> LinearGaussianBatch: ...

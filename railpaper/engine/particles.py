@@ -189,3 +189,47 @@ def liu_west_move(theta: np.ndarray, weights: np.ndarray, delta: float, rng: np.
     if log_mask is not None:
         theta_new[:, log_mask] = np.exp(theta_new[:, log_mask])
     return theta_new
+
+
+def weighted_quantiles(values: np.ndarray, weights: np.ndarray, probs) -> np.ndarray:
+    """Weighted quantiles per column for one or several weight vectors.
+
+    The quantile p is the smallest value whose cumulative weight reaches p (inverse of the
+    weighted empirical CDF; with equal weights, numpy's ``method="inverted_cdf"``).
+
+    Parameters
+    ----------
+    values : ndarray, (N, d)
+    weights : ndarray, (N,) or (J, N)
+        Normalised weights (J sets, e.g. J steps).
+    probs : sequence of float in (0, 1)
+
+    Returns
+    -------
+    quantiles : ndarray, (len(probs), d) or (len(probs), J, d)
+    """
+    values = np.asarray(values, float)
+    W = np.atleast_2d(np.asarray(weights, float))
+    order = np.argsort(values, axis=0, kind="stable")                    # (N, d)
+    out = np.empty((len(probs), W.shape[0], values.shape[1]))
+    for j in range(values.shape[1]):
+        cw = np.cumsum(W[:, order[:, j]], axis=1)                       # (J, N)
+        cw /= cw[:, -1:]
+        for i, prob in enumerate(probs):
+            first = np.argmax(cw >= prob * (1.0 - 1e-12), axis=1)        # rounding-safe
+            out[i, :, j] = values[order[first, j], j]
+    return out if np.ndim(weights) == 2 else out[:, 0]
+
+
+def normalise_log_weight_columns(LW: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Column-wise log-sum-exp of (N, J) log weights: normalised weights (J, N) and log norms."""
+    LW = np.where(np.isnan(LW), -np.inf, LW)
+    top = np.max(LW, axis=0)
+    finite = np.isfinite(top)
+    with np.errstate(over="ignore", invalid="ignore"):
+        shifted = np.exp(LW - np.where(finite, top, 0.0))
+    total = shifted.sum(axis=0)
+    W = np.where(finite, shifted / np.where(finite, total, 1.0), 1.0 / LW.shape[0])
+    with np.errstate(divide="ignore"):
+        log_norm = np.where(finite, top + np.log(total), -np.inf)
+    return W.T, log_norm

@@ -45,12 +45,24 @@ from typing import Callable
 import numpy as np
 
 from railpaper.engine.kalman import predict, update
-from railpaper.engine.particles import (effective_sample_size, gaussian_draws,
-                                            gaussian_log_density, multinomial_search_resample,
-                                            normalise_log_weights, weighted_mean_cov)
-from railpaper.engine.rbpf import (ENGINES, FilterRun, bank_step, initial_bank,
-                                       mixture_moments, run_filter)
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.particles import (
+    effective_sample_size,
+    gaussian_draws,
+    gaussian_log_density,
+    multinomial_search_resample,
+    normalise_log_weights,
+    weighted_mean_cov,
+)
+from railpaper.engine.rbpf import (
+    ENGINES,
+    FilterRun,
+    StepEstimate,
+    bank_step,
+    initial_bank,
+    mixture_moments,
+    run_filter,
+)
 
 WEIGHTINGS = ("ratio", "printed")
 
@@ -102,7 +114,7 @@ class QuasiGaussianRBPF:
         w = np.where(keep, w, 0.0)
         return w / w.sum()
 
-    def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
+    def step(self, y: np.ndarray, u: np.ndarray | None = None) -> StepEstimate:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
         n_particles = self.theta.shape[0]
         s = self.sys
@@ -136,9 +148,10 @@ class QuasiGaussianRBPF:
         with np.errstate(divide="ignore"):
             self.log_w = np.log(q)
         self.theta, self.x, self.P, self.sys = theta_new, x, P, s_new
-        return dict(theta_mean=theta_hat, theta_std=np.sqrt(np.diag(P_theta)), x_mean=x_mean,
-                    x_std=x_std, ess=ess, degenerate=bool(degenerate or flat),
-                    log_evidence=log_norm - np.log(n_particles), resampled=self.search)
+        return StepEstimate(theta_mean=theta_hat, theta_std=np.sqrt(np.diag(P_theta)),
+                            x_mean=x_mean, x_std=x_std, ess=ess,
+                            degenerate=bool(degenerate or flat),
+                            log_evidence=log_norm - np.log(n_particles), resampled=self.search)
 
 
 def run_qgrbpf(system, y, theta0, x0, P0, rng, *, u=None, **options) -> FilterRun:

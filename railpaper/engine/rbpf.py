@@ -36,10 +36,14 @@ import numpy as np
 
 from railpaper.engine.kalman import predict, update
 from railpaper.engine.kalman_bank import kalman_run, kalman_step
-from railpaper.engine.particles import (effective_sample_size, liu_west_move,
-                                            normalise_log_weights, systematic_resample,
-                                            weighted_mean_cov)
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.particles import (
+    effective_sample_size,
+    liu_west_move,
+    normalise_log_weights,
+    systematic_resample,
+    weighted_mean_cov,
+)
 
 SCHEMES = ("paper", "working")
 ENGINES = ("compiled", "numpy")
@@ -59,6 +63,38 @@ def bank_step(x, P, system: LinearGaussianBatch, y, u, engine: str, ancestors=No
     x_prior, P_prior = predict(x, P, system.F, system.Q, system.B, u)
     x, P, loglik, _, _ = update(x_prior, P_prior, y, system.H, system.R)
     return x, P, loglik
+
+
+@dataclass
+class StepEstimate:
+    """What one step of a parameter filter (:class:`RaoBlackwellisedPF`, the Q-GRBPF) returns.
+
+    Attributes
+    ----------
+    theta_mean, theta_std : ndarray, (d,)
+        Weighted mean and standard deviation of the parameter particles (paper 003 Eq. 17),
+        in the parameters' units.
+    x_mean, x_std : ndarray, (n,), or None
+        Mixture mean and standard deviation of the linear state (None until filled in by
+        :meth:`RaoBlackwellisedPF.steps`), in the state's units.
+    ess : float
+        Effective sample size of the step's weights (particles).
+    degenerate : bool
+        Every weight underflowed (the model cannot explain the measurement).
+    log_evidence : float
+        log p(y_k | y_1..k-1) of the step (nan while tempering).
+    resampled : bool
+        The particles were resampled after this step.
+    """
+
+    theta_mean: np.ndarray
+    theta_std: np.ndarray
+    x_mean: np.ndarray | None
+    x_std: np.ndarray | None
+    ess: float
+    degenerate: bool
+    log_evidence: float
+    resampled: bool
 
 
 @dataclass
@@ -199,16 +235,16 @@ class RaoBlackwellisedPF:
         self.ancestors = None        # resampled but not yet copied: the bank's gather copies
         self.k = 0
 
-    def step(self, y: np.ndarray, u: np.ndarray | None = None) -> dict:
+    def step(self, y: np.ndarray, u: np.ndarray | None = None) -> StepEstimate:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
         x, P, loglik = bank_step(self.x, self.P, self.sys, y, u, self.engine,  # Steps 2.6,
                                  self.ancestors)                             # 2.1, 2.4
         out, w = self._weigh(loglik, x, np.diagonal(P, axis1=-2, axis2=-1))
-        self._finish(w, out["resampled"], x, P)
+        self._finish(w, out.resampled, x, P)
         return out
 
     def steps(self, Y: np.ndarray, U: np.ndarray | None = None, max_chunk: int = 32
-              ) -> list[dict]:
+              ) -> list[StepEstimate]:
         """Process measurements ``Y`` (K, p): the same results as K calls of :meth:`step`.
 
         With the working scheme on the compiled engine, the particles' matrices are fixed
@@ -235,15 +271,15 @@ class RaoBlackwellisedPF:
                 out, w = self._weigh(loglik[:, j])
                 outputs.append(out)
                 weights.append(w)
-                if out["resampled"]:
+                if out.resampled:
                     break
                 with np.errstate(divide="ignore"):
                     self.log_w = np.log(w)
             means, stds = mixture_moments_steps(x_hist[:, :j + 1], var_hist[:, :j + 1],
                                                 np.array(weights))
             for o, mean, std in zip(outputs[-(j + 1):], means, stds):
-                o["x_mean"], o["x_std"] = mean, std
-            if out["resampled"]:
+                o.x_mean, o.x_std = mean, std
+            if out.resampled:
                 if j < len(Yc) - 1:                    # the bank's state after step j
                     x_end, P_end, _ = kalman_run(self.x, self.P, self.sys, Yc[:j + 1],
                                                  None if Uc is None else Uc[:j + 1],
@@ -257,7 +293,7 @@ class RaoBlackwellisedPF:
         return outputs
 
     def _weigh(self, loglik: np.ndarray, x: np.ndarray | None = None,
-               var: np.ndarray | None = None) -> tuple[dict, np.ndarray]:
+               var: np.ndarray | None = None) -> tuple[StepEstimate, np.ndarray]:
         """Weights, estimates and the resampling decision of step k from its log-likelihoods
         (the state moments only when x and var = diag P are given)."""
         self.k += 1
@@ -271,9 +307,9 @@ class RaoBlackwellisedPF:
         ess = effective_sample_size(w)
         resample = (self.scheme == "paper" or degenerate
                     or ess < self.ess_fraction * n_particles)
-        out = dict(theta_mean=theta_mean, theta_std=np.sqrt(np.diag(theta_cov)),
-                   x_mean=x_mean, x_std=x_std, ess=ess, degenerate=degenerate,
-                   log_evidence=log_norm if beta == 1.0 else np.nan, resampled=resample)
+        out = StepEstimate(theta_mean=theta_mean, theta_std=np.sqrt(np.diag(theta_cov)),
+                           x_mean=x_mean, x_std=x_std, ess=ess, degenerate=degenerate,
+                           log_evidence=log_norm if beta == 1.0 else np.nan, resampled=resample)
         return out, w
 
     def _finish(self, w: np.ndarray, resample: bool, x: np.ndarray, P: np.ndarray) -> None:
@@ -300,10 +336,11 @@ class RaoBlackwellisedPF:
         self.theta, self.x, self.P, self.sys, self.ancestors = theta, x, P, sys, ancestors
 
 
-def stack_steps(outputs: list[dict], theta: np.ndarray, weights: np.ndarray) -> FilterRun:
-    """Stack per-step dicts into a :class:`FilterRun`."""
+def stack_steps(outputs: list[StepEstimate], theta: np.ndarray, weights: np.ndarray
+                ) -> FilterRun:
+    """Stack per-step estimates into a :class:`FilterRun`."""
     def col(key, dtype=float):
-        return np.array([o[key] for o in outputs], dtype=dtype)
+        return np.array([getattr(o, key) for o in outputs], dtype=dtype)
     return FilterRun(theta_mean=col("theta_mean"), theta_std=col("theta_std"),
                      x_mean=col("x_mean"), x_std=col("x_std"), ess=col("ess"),
                      resampled=col("resampled", bool), degenerate=col("degenerate", bool),

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -224,7 +225,27 @@ ProgressCallback = Callable[[float, str], None]
 
 
 def no_progress(fraction: float, message: str) -> None:  # noqa: ARG001 - callback signature
-    """Default progress callback: silent."""
+    """Progress callback that says nothing."""
+
+
+#: Environment variable naming the file a run inside a notebook kernel reports its progress to
+#: (set by :func:`railpaper.pipeline.chapters.run_chapter` for a run in a terminal).
+PROGRESS_FILE_ENV = "RAILPAPER_PROGRESS_FILE"
+
+
+def default_progress() -> Callable[[float, str], None]:
+    """The progress callback of a run given none: one line ``fraction<TAB>message`` appended to
+    the file named by :data:`PROGRESS_FILE_ENV` per call when it is set, else
+    :func:`no_progress`.  The pipeline reads that file and shows the run's progress in the
+    terminal: a chapter's notebook cell can compute for minutes."""
+    path = os.environ.get(PROGRESS_FILE_ENV)
+    if not path:
+        return no_progress
+
+    def report(fraction: float, message: str) -> None:
+        with open(path, "a") as handle:
+            handle.write(f"{float(fraction):.4f}\t{' '.join(str(message).split())}\n")
+    return report
 
 
 #: Copies of every particle's Kalman mean and covariance (n + n² doubles) alive at a filter's

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import logging
@@ -17,6 +18,7 @@ from railpaper.experiments import CHAPTER_MODULES, available_chapters, load_chap
 from railpaper.experiments.base import ChapterSpec, ParameterError
 from railpaper.paths import BOOK_DIR, NOTEBOOK_DIR
 from railpaper.pipeline.page import render_run_page
+from railpaper.pipeline.progress import TerminalProgress
 
 KERNEL_NAME = "railpaper-venv"
 
@@ -185,7 +187,9 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
     (error, interrupt) it is removed and the previous good outputs stay untouched.  The kernel's
     stderr goes to ``.<out_dir name>.kernel.log`` beside ``out_dir``.  With ``page``, the executed
     notebook is also rendered as a web page, ``out_dir/index.html`` (see
-    :mod:`railpaper.pipeline.page`; the book renders its chapters itself).
+    :mod:`railpaper.pipeline.page`; the book renders its chapters itself).  With ``progress``
+    (the CLI sets it when stderr is a terminal), the chapter's own progress is shown on one
+    status line (:class:`railpaper.pipeline.progress.TerminalProgress`).
 
     Returns
     -------
@@ -217,11 +221,13 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
         kernel_log = out.parent / f".{out.name}.kernel.log"
         kernel_log.write_text("")                 # this run's log only; kernel and loggers append
         try:
-            with _notebook_logs_to(kernel_log):
+            shown = (TerminalProgress(name, out.parent / f".{out.name}.progress")
+                     if progress else contextlib.nullcontext())
+            with _notebook_logs_to(kernel_log), shown:
                 papermill.execute_notebook(
                     str(source), str(staging / spec.notebook),
                     parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
-                    kernel_name=kernel, cwd=str(staging), progress_bar=progress,
+                    kernel_name=kernel, cwd=str(staging), progress_bar=False,
                     request_save_on_cell_execute=False,
                     kernel_manager_class=_logging_kernel_manager(kernel_log))
             if not (staging / "metrics.json").exists():

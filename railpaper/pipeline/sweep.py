@@ -39,8 +39,8 @@ SEED_PARAMETER = "seed"
 
 #: One BLAS/OpenMP/numba thread per worker process: two numpy processes on two cores with default
 #: threading slow each other several-fold, and the thread count changes the last digits of floats.
-#: Numba's parallel loops (the Kalman bank) with two threads in each of two workers ran 4-5x
-#: slower than with one (paper 004's record: 0.74 s -> 3.8-4.4 s at load 5).
+#: Numba's parallel loops (the Kalman bank) with two threads in each of two workers run several
+#: times slower than with one.
 SINGLE_THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                      "NUMBA_NUM_THREADS": "1"}
 

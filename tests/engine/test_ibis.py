@@ -14,7 +14,7 @@ import pytest
 
 from railpaper.engine import ibis as ibis_module
 from railpaper.engine.ibis import credible_interval_covers, run_ibis
-from railpaper.engine.ibis_parts import weighted_quantiles
+from railpaper.engine.particles import normalise_log_weight_columns, weighted_quantiles
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.models.linear_toys import eq18_system, simulate_eq18
@@ -214,7 +214,7 @@ def test_broken_samplers_fail_a_check(monkeypatch):
     """Planted bugs, each caught by a check the correct sampler passes (tried: the scalar
     check gives sd errors of −20 to −29 % and a mean error of 0.39 sd with doubled weights;
     without moves the particles collapse and the intervals covered 49 % of the time)."""
-    normalise = ibis_module.normalise_log_weight_columns
+    normalise = normalise_log_weight_columns
     monkeypatch.setattr(ibis_module, "normalise_log_weight_columns",
                         lambda LW: normalise(2.0 * LW))
     _, errors = scalar_run()                              # weights count the likelihood twice

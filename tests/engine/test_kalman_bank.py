@@ -193,7 +193,7 @@ def test_chunked_working_rbpf_equals_step_by_step(lateral_record):
                            np.random.default_rng(7), **opts)
     chunked = a.steps(ys, u, max_chunk=16)
     stepwise = [b.step(ys[k], u[k]) for k in range(len(ys))]
-    assert sum(o["resampled"] for o in stepwise) >= 5          # chunks really get cut back
+    assert sum(o.resampled for o in stepwise) >= 5          # chunks really get cut back
     for o1, o2 in zip(chunked, stepwise):
         for key in o1:
             if key in ("x_mean", "x_std"):              # batched over a chunk: rounding only
@@ -231,7 +231,7 @@ def test_compiled_qgrbpf_second_update_equals_the_textbook_one_on_the_lateral_mo
         outs = [f.step(ys[k], u[k]) for f in filters]
         np.testing.assert_allclose(filters[0].x, filters[1].x, rtol=1e-7, atol=1e-13)
         np.testing.assert_allclose(filters[0].P, filters[1].P, rtol=1e-7, atol=1e-16)
-        np.testing.assert_allclose(outs[0]["theta_mean"], outs[1]["theta_mean"], rtol=1e-9)
+        np.testing.assert_allclose(outs[0].theta_mean, outs[1].theta_mean, rtol=1e-9)
         filters[1].x, filters[1].P = filters[0].x.copy(), filters[0].P.copy()   # same bank
         filters[1].theta, filters[1].sys = filters[0].theta.copy(), filters[0].sys
         filters[1].rng = np.random.default_rng(k)

@@ -100,10 +100,10 @@ def test_qgrbpf_moment_step_is_weighted_mean_and_cov(record):
         loglik.append(multivariate_normal(np.zeros(2), S).logpdf(record.y[0]))
     w = np.exp(np.array(loglik) - max(loglik))
     w /= w.sum()
-    np.testing.assert_allclose(out["theta_mean"], np.average(theta0, axis=0, weights=w),
+    np.testing.assert_allclose(out.theta_mean, np.average(theta0, axis=0, weights=w),
                                atol=1e-12)
     cov = np.cov(theta0.T, aweights=w, bias=True)
-    np.testing.assert_allclose(out["theta_std"], np.sqrt(np.diag(cov)), atol=1e-12)
+    np.testing.assert_allclose(out.theta_std, np.sqrt(np.diag(cov)), atol=1e-12)
 
 
 def joint_log_likelihood(theta, y, x0_cov):

@@ -8,18 +8,11 @@ from pathlib import Path
 import pytest
 
 from railpaper.experiments import load_chapter
-from railpaper.pipeline.book import build_book
 from railpaper.pipeline.chapters import book_chapters
 
 pytestmark = pytest.mark.slow
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-
-
-@pytest.fixture(scope="module")
-def built_book(tmp_path_factory):
-    book = tmp_path_factory.mktemp("book") / "book"
-    return build_book(quick=True, book_dir=book, progress=False)
 
 
 def rendered_dom(page: Path, profile: Path) -> tuple[str, list[str]]:

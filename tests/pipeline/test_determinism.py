@@ -1,7 +1,7 @@
 """Same parameters and seed → byte-identical metrics.json, across two separate processes.
 
-Two independent ``railpaper run reduced-order-observer --quick`` processes (one BLAS thread
-each) must write the same bytes; wall-clock figures must be in timings.json, not metrics.json.
+Two independent quick runs of ``reduced-order-observer`` (the quick book's, and a ``railpaper
+run`` on one BLAS thread) must write the same bytes; wall-clock figures must be in timings.json, not metrics.json.
 """
 
 import json
@@ -29,11 +29,12 @@ def run_in_own_process(out_dir: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def two_runs(tmp_path_factory):
-    dirs = [tmp_path_factory.mktemp(f"determinism{i}") / "run" for i in (1, 2)]
-    for out in dirs:
-        run_in_own_process(out)
-    return dirs
+def two_runs(tmp_path_factory, quick_chapter_dir):
+    """The quick book's run of the chapter (its own kernel process, default threads) and one
+    more ``railpaper run`` in a process of its own on one BLAS/OpenMP thread."""
+    out = tmp_path_factory.mktemp("determinism") / "run"
+    run_in_own_process(out)
+    return [quick_chapter_dir(CHAPTER), out]
 
 
 def test_metrics_json_bit_identical_across_processes(two_runs):

@@ -32,7 +32,7 @@ from railpaper import track
 from railpaper.discretise import foh
 from railpaper.estimators import functional_observer as fo
 from railpaper.estimators import kalman_baseline as kb
-from railpaper.experiments.base import ParameterError
+from railpaper.experiments.base import ParameterError, default_progress
 from railpaper.experiments.partial_state_observer import evidence
 from railpaper.experiments.partial_state_observer.result import (
     Estimates,
@@ -318,7 +318,7 @@ def run(*, quick: bool = False, progress=None, **params) -> PartialStateObserver
     """
     p = params
     validate(p)
-    progress = progress or (lambda fraction, message: None)
+    progress = progress or default_progress()
     started = time.perf_counter()
     chosen = p["suspension_reading"]
     ctxs = {r: _Context(p, r, kalman=r == chosen) for r in evidence.READINGS}

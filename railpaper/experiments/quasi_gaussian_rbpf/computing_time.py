@@ -12,10 +12,10 @@ Two measurements, both on the chapter's main record:
   sees cancels; the median over repeats comes with its distribution-free 95 % interval
   (:func:`railpaper.stats.median_interval`).
 
-Everything is timed on one numba thread (restored afterwards): the comparison is of the work
-each algorithm does per step, and a parallel Kalman bank on a machine busy with other processes
-spends most of its time waiting for its threads (a step at N = 1000 took 13 ms instead of 0.3 ms
-at load 6 on 2 cores), which would swamp the resampling share.  Wall-clock numbers are not
+Everything is timed on one thread (:func:`railpaper.threads.one_thread`): the comparison is of
+the work each algorithm does per step, and a parallel Kalman bank on a machine busy with other
+processes spends most of its time waiting for its threads, which would swamp the resampling
+share.  Wall-clock numbers are not
 reproducible bit for bit: they go to ``timings.json``.
 """
 

@@ -35,7 +35,12 @@ import pandas as pd
 from railpaper.engine.grid_posterior import grid_posterior
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF
 from railpaper.engine.rbpf import RaoBlackwellisedPF, run_filter
-from railpaper.experiments.base import ParameterError, check_banks, no_progress
+from railpaper.experiments.base import (
+    ParameterError,
+    check_banks,
+    default_progress,
+    no_progress,
+)
 from railpaper.experiments.quasi_gaussian_rbpf.computing_time import timing
 from railpaper.experiments.quasi_gaussian_rbpf.evidence import (
     descriptive_metrics,
@@ -252,7 +257,7 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None,
     Runs on one numba and one OpenBLAS thread (:func:`railpaper.threads.one_thread`); the Monte
     Carlo records run on sweep workers, one thread each, anyway.
     """
-    progress = progress or no_progress
+    progress = progress or default_progress()
     p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
     validate(p)
     with one_thread():

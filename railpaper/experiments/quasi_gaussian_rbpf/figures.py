@@ -14,11 +14,15 @@ from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from railpaper.experiments.display import legend_below
 from railpaper.experiments.quasi_gaussian_rbpf.result import ReadingsStudy
-from railpaper.experiments.quasi_gaussian_rbpf.spec import NAMES, PARAMS, STYLES
+from railpaper.experiments.quasi_gaussian_rbpf.spec import (
+    NAMES,
+    PAPER_STEPS,
+    PARAMS,
+    STYLES,
+)
 
 WIDTH_IN = 7.0
-#: The paper's convergence steps and final errors (Section IV, discussion of Figs 1–4).
-PAPER_STEPS = {"a": {"qgrbpf": 4, "rbpf": 55}, "b": {"qgrbpf": 4, "rbpf": 53}}
+#: The paper's final errors (Section IV, discussion of Figs 1–4); its steps: spec.PAPER_STEPS.
 PAPER_ERRORS = {"a": {"qgrbpf": 0.066, "rbpf": 0.167}, "b": {"qgrbpf": -0.055, "rbpf": -0.067}}
 #: Steps shown in the close-up of the first steps (holds the paper's steps 4 and 53-55).
 WINDOW_STEPS = 80
@@ -37,7 +41,7 @@ def _paper_steps(ax, par: str) -> None:
     labels = {"qgrbpf": "paper: Q-GRBPF converges (step 4)",
               "rbpf": "paper: RBPF converges (step 55 for a, 53 for b)"}
     for name, ls in (("qgrbpf", "-"), ("rbpf", "--")):
-        ax.axvline(PAPER_STEPS[par][name], color=PAPER_COLOR, ls=ls, lw=1.0, label=labels[name])
+        ax.axvline(PAPER_STEPS[(par, name)], color=PAPER_COLOR, ls=ls, lw=1.0, label=labels[name])
 
 
 def estimates(result, params):

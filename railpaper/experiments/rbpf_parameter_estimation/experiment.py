@@ -32,7 +32,7 @@ from railpaper.experiments.base import (
     ParameterError,
     check_banks,
     check_sample_time,
-    no_progress,
+    default_progress,
 )
 from railpaper.experiments.rbpf_parameter_estimation import evidence, lateral, posterior
 from railpaper.experiments.rbpf_parameter_estimation.measurements import (
@@ -86,7 +86,7 @@ def validate(p: dict) -> None:
 def run(*, quick: bool = False, progress=None, **p) -> RbpfParameterEstimationResult:
     """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`), on one numba and one
     OpenBLAS thread (:func:`railpaper.threads.one_thread`)."""
-    progress = progress or no_progress
+    progress = progress or default_progress()
     validate(p)
     with one_thread():
         return _run(p, progress)

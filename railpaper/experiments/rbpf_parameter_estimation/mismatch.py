@@ -25,12 +25,8 @@ sensor noise, then low-pass causally (the paper filtered the acquired data, nois
 ``"paper_zero_phase"`` — the same, forward-backward (offline, no delay); ``"sensor"`` — low-pass
 the truth at the plant's rate, sample, add white noise (a filter inside the sensor).
 
-Measured at the chapter's defaults, 20 records (seeds 0-19), paper chain, one numba/BLAS thread
-(147 s at load 9 on 2 cores, 41 s for 5 records): EKF 0 of 10 guesses on record 0 (matched plant:
-10), first guess within 5 % on 0/20 records [0, 0.17] (matched 20/20 [0.83, 1]); the ten guesses
-agree to 0.5 % on a biased point (λ −12 %, Csaly −12 %) instead of diverging.  RBPF working
-scheme every parameter within 5 % from step 350: 0/20 [0, 0.17] (matched 15/20 [0.51, 0.91]).
-Each component alone also leaves both at most 4/20 records (``components=("creep",)`` etc.).
+What the study finds (the EKF's and the RBPF's rates under the truth plant against the matched
+plant, per component) is on the chapter's page, computed by the run.
 """
 
 from __future__ import annotations

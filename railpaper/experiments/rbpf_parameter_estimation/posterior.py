@@ -18,7 +18,7 @@ chapter.  The chapter runs it with the RBPF's own prior box, state prior (x0, P0
 Each sampler draws from its own generator ``[seed, 17]`` (the filters use ``seed`` (toy),
 ``[seed, 7]``, ``[seed, 11]`` and ``[seed, 13]`` (lateral)), so adding it changes no other
 number of the chapter.  IBIS moves use the independent Gaussian proposal (Chopin's choice: on
-the lateral model 2-3 times cheaper than the random walk for the same posterior, measured).
+the lateral model cheaper than the random walk for the same posterior).
 
 Calibration: a 90 % interval covers the truth when it holds the true value; the coverage of a
 scheme is the fraction of records × parameters covered at the last step.  IBIS's interval is its

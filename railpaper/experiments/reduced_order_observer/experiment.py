@@ -28,7 +28,7 @@ import pandas as pd
 
 from railpaper import track
 from railpaper.estimators import reduced_order_observer as roo
-from railpaper.experiments.base import ParameterError
+from railpaper.experiments.base import ParameterError, default_progress
 from railpaper.experiments.reduced_order_observer import evidence, kalman, record
 from railpaper.experiments.reduced_order_observer.record import (  # noqa: F401 (chapter API)
     ObserverRun,
@@ -148,7 +148,7 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
     ``quick`` is not read: ``params`` already hold the quick sizes.
     """
     validate(params)
-    progress = progress or (lambda fraction, message: None)
+    progress = progress or default_progress()
     started = time.perf_counter()
     vehicle = sw.load_parameters(p0_basis=params["p0_basis"])
     A, B = sw.state_space(vehicle)

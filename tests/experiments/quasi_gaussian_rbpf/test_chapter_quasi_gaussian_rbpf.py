@@ -126,8 +126,8 @@ def test_tables_show_the_monte_carlo_medians():
 
 
 @pytest.mark.slow
-def test_outputs_complete(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_outputs_complete(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())["metrics"]
     for key in ("convergence_step_a_rbpf", "convergence_step_a_qgrbpf", "convergence_step_b_rbpf",
                 "convergence_step_b_qgrbpf", "final_error_a_rbpf", "final_error_a_qgrbpf",
@@ -156,11 +156,11 @@ def _outputs(notebook: dict, mime: str) -> str:
 
 
 @pytest.mark.slow
-def test_claims_glued_at_the_top_rules_at_the_end(quick_run_dir):
+def test_claims_glued_at_the_top_rules_at_the_end(quick_chapter_dir, built_book):
     """The ledger rows of this run are glued once (shown at the top), every row judged on >= 5
     Monte Carlo samples; the claims section shows the rules; the page shows each row once."""
     from railpaper.pipeline.ledger import chapter_claims, chapter_rules, run_rows
-    out = quick_run_dir(CHAPTER)
+    out = quick_chapter_dir(CHAPTER)
     rows, _ = run_rows(CHAPTER, out)
     assert [r.verdict for r in rows if r.verdict == "missing"] == []
     assert all(r.n_samples is not None and r.n_samples >= 5 for r in rows if r.ours != "-")
@@ -171,16 +171,16 @@ def test_claims_glued_at_the_top_rules_at_the_end(quick_run_dir):
     assert len(glued) == 1 and "".join(glued[0]) == chapter_claims(CHAPTER, out)
     shown = _outputs(notebook, "text/markdown")
     assert chapter_rules(CHAPTER) in shown and chapter_claims(CHAPTER, out) not in shown
-    page = (out / "page" / "quasi_gaussian_rbpf.html").read_text()
+    page = (built_book / "chapters" / CHAPTER / "quasi_gaussian_rbpf.html").read_text()
     assert page.count('class="verdict verdict-') == len(rows)
 
 
 @pytest.mark.slow
-def test_page_has_no_stray_output(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_page_has_no_stray_output(quick_chapter_dir, built_book):
+    out = quick_chapter_dir(CHAPTER)
     notebook = json.loads((out / "quasi_gaussian_rbpf.ipynb").read_text())
     text = _outputs(notebook, "text/plain") + _outputs(notebook, "text/markdown")
-    page = (out / "page" / "quasi_gaussian_rbpf.html").read_text()
+    page = (built_book / "chapters" / CHAPTER / "quasi_gaussian_rbpf.html").read_text()
     for stray in STRAY:
         assert stray not in text, stray
     for stray in ("PosixPath(", "dtype:", "<Figure size", "NaN"):
@@ -188,8 +188,8 @@ def test_page_has_no_stray_output(quick_run_dir):
 
 
 @pytest.mark.slow
-def test_final_errors_are_the_timeseries_last_row(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_final_errors_are_the_timeseries_last_row(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
     run = json.loads((out / "metrics.json").read_text())
     params, metrics = run["parameters"], run["metrics"]
     last = pd.read_csv(out / "timeseries.csv").iloc[-1]
@@ -203,7 +203,7 @@ def test_final_errors_are_the_timeseries_last_row(quick_run_dir):
 
 
 @pytest.mark.slow
-def test_metrics_within_tolerances(quick_run_dir):
-    rows = check_chapter(CHAPTER, quick_run_dir(CHAPTER))
+def test_metrics_within_tolerances(quick_chapter_dir):
+    rows = check_chapter(CHAPTER, quick_chapter_dir(CHAPTER))
     assert rows and all(r.status == "ok" for r in rows), [(r.metric, r.value, r.status) for r in rows
                                                           if r.status != "ok"]

@@ -20,8 +20,8 @@ CHAPTER = "reduced-order-observer"
 pytestmark = pytest.mark.slow
 
 
-def test_outputs_complete(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_outputs_complete(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["chapter"] == CHAPTER and metrics["quick"] is True
     for lab in ("60kmh", "100kmh"):
@@ -45,13 +45,13 @@ def test_outputs_complete(quick_run_dir):
             assert f"mc_force_rms_error_ratio_{est}_{lab}_high" in metrics["metrics"]
 
 
-def test_metrics_within_tolerances(quick_run_dir):
-    rows = check_chapter(CHAPTER, quick_run_dir(CHAPTER))
+def test_metrics_within_tolerances(quick_chapter_dir):
+    rows = check_chapter(CHAPTER, quick_chapter_dir(CHAPTER))
     assert rows and all(r.status == "ok" for r in rows), [(r.metric, r.value, r.status) for r in rows]
 
 
-def test_force_error_recomputed_from_timeseries(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_force_error_recomputed_from_timeseries(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
     ts = pd.read_csv(out / "timeseries.csv")
     window = ts.t_s >= metrics["parameters"]["error_window_start_s"]
@@ -61,9 +61,9 @@ def test_force_error_recomputed_from_timeseries(quick_run_dir):
                                                          rel=1e-12)
 
 
-def test_convergence_time_matches_error_dynamics(quick_run_dir):
+def test_convergence_time_matches_error_dynamics(quick_chapter_dir):
     """Independent expectation: e(t) = expm(F t) e0 against 5 % of the RMS of the true z_w."""
-    out = quick_run_dir(CHAPTER)
+    out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
     params = metrics["parameters"]
     ts = pd.read_csv(out / "timeseries.csv")
@@ -77,10 +77,10 @@ def test_convergence_time_matches_error_dynamics(quick_run_dir):
         assert metrics["metrics"][f"convergence_time_s_{lab}"] == pytest.approx(predicted, abs=0.01)
 
 
-def test_notebook_and_library_give_identical_metrics(quick_run_dir):
+def test_notebook_and_library_give_identical_metrics(quick_chapter_dir):
     """The notebook adds nothing: every metric, the Monte Carlo evidence included, is the
     library's (``chapter.run``), so ``railpaper bands`` and the claims read the same numbers."""
-    out = quick_run_dir(CHAPTER)
+    out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
     direct = json.loads(json.dumps(chapter.run(quick=True, **SPEC.resolve({}, True)).metrics))
     assert metrics["metrics"] == direct
@@ -96,12 +96,12 @@ def _outputs(notebook: dict, mime: str) -> str:
                    if c["cell_type"] == "code" for o in c.get("outputs", []))
 
 
-def test_page_opens_with_reference_claims_and_rerun_box(quick_run_dir):
+def test_page_opens_with_reference_claims_and_rerun_box(quick_chapter_dir):
     """Issue 14's page top: title, reference, claims table (glued once, shown at the top), re-run
     box; the rules at the end; no code cell needs a name the page does not explain."""
     from railpaper.pipeline.header import reference_markdown, rerun_markdown
     from railpaper.pipeline.ledger import chapter_claims, chapter_rules
-    out = quick_run_dir(CHAPTER)
+    out = quick_chapter_dir(CHAPTER)
     notebook = json.loads((out / "reduced_order_observer.ipynb").read_text())
     cells = notebook["cells"]
     assert "".join(cells[0]["source"]).startswith(f"# {SPEC.title}\n")
@@ -128,8 +128,8 @@ def test_page_opens_with_reference_claims_and_rerun_box(quick_run_dir):
     assert not hasattr(chapter, "claims_table")
 
 
-def test_page_has_numbered_figures_and_no_stray_output(quick_run_dir):
-    out = quick_run_dir(CHAPTER)
+def test_page_has_numbered_figures_and_no_stray_output(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
     notebook = json.loads((out / "reduced_order_observer.ipynb").read_text())
     markdown = "".join("".join(c["source"]) for c in notebook["cells"] if c["cell_type"] == "markdown")
     figures = re.findall(r"```\{figure\} (\w+)\.png\n:name: (fig-roo-[\w-]+)", markdown)
@@ -156,10 +156,10 @@ def test_rerun_with_other_speeds_keys_metrics_by_speed(tmp_path):
     assert "not comparable" in check.stdout
 
 
-def test_failed_run_keeps_previous_output(quick_run_dir, tmp_path):
+def test_failed_run_keeps_previous_output(quick_chapter_dir, tmp_path):
     import shutil
     out = tmp_path / "kept"
-    shutil.copytree(quick_run_dir(CHAPTER), out)
+    shutil.copytree(quick_chapter_dir(CHAPTER), out)
     before = (out / "metrics.json").read_bytes()
     result = railpaper_cli("run", CHAPTER, "--quick", "-p", "dt_s", "0.002", "--out", str(out))
     assert result.returncode == 2
