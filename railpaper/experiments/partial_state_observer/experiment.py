@@ -7,7 +7,7 @@ observer of ``z = [z_w1 … z_w4]`` (the paper's, which needs the track input u 
 FRA class-5 profile at several speeds, and compare with two baselines: ``ẑ = q`` and a
 steady-state Kalman filter with a shaping filter for q (not told q).
 
-Table 1's suspension rows can be read two ways (:mod:`.partial_state_observer_mc`); the
+Table 1's suspension rows can be read two ways (:mod:`~railpaper.experiments.partial_state_observer.evidence`); the
 parameter ``suspension_reading`` selects the one the single-record illustrations use, and the
 Monte Carlo evidence of every reading is computed in every run (metrics ending ``_labels``,
 ``_symbols``).  The single-record metrics (no ``mc_`` prefix) are one record (seed ``seed``).

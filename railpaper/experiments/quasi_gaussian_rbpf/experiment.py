@@ -207,7 +207,7 @@ def _timeseries(p: dict, rep: OneRecord) -> pd.DataFrame:
 
 
 def _timing(p: dict, y: np.ndarray, progress):
-    """Computing times on the main record (:func:`quasi_gaussian_rbpf_timing.timing`)."""
+    """Computing times on the main record (:func:`~railpaper.experiments.quasi_gaussian_rbpf.computing_time.timing`)."""
     system = paper004_system(p["q_var"], p["r_var"])
 
     def fresh_filter(name: str, n: int, repeat: int):

@@ -9,7 +9,7 @@ particles with Metropolis–Hastings steps on the full-history likelihood — so
 parameter filter whose target at every step is the posterior: the calibrated scheme of this
 chapter.  The chapter runs it with the RBPF's own prior box, state prior (x0, P0) and noise:
 
-* toy: the box of initial condition 1 (:data:`~rbpf_parameter_estimation_toy.TOY_INITS` ±
+* toy: the box of initial condition 1 (:data:`~railpaper.experiments.rbpf_parameter_estimation.toy.TOY_INITS` ±
   ``toy_prior_halfwidth``), x0 = 0, P0 = I, ``toy_ibis_particles`` particles, on every toy
   record (re-simulated from its seed: the same draws as the filters');
 * lateral: θ × [``prior_low``, ``prior_high``], x0 = 0, P0 = 1e-10 I, the record's Q and R,
