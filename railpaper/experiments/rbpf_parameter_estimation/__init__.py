@@ -6,10 +6,7 @@ EKF, on the Eq. (18) toy and the 16-state lateral vehicle, with the exact poster
 (``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.rbpf_parameter_estimation.experiment import (
-    SPEC,
-    run,
-    validate,
-)
+from railpaper.experiments.rbpf_parameter_estimation.experiment import run, validate
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 
 __all__ = ["SPEC", "run", "validate"]

@@ -38,7 +38,9 @@ def test_plumbing_hidden_and_no_string_keyed_results():
             continue
         assert "result.data" not in src
         assert len(cell["source"]) <= 25
-        if "save_figure(fig" in src or "write_outputs(out_dir" in src or "glue(\"" in src:
+        if "save_figure(fig" in src:                   # the code of a figure: one click away
+            assert {"hide-input", "remove-output"} <= set(tags), src
+        elif "write_outputs(out_dir" in src or "glue(\"" in src:   # plumbing: hidden
             assert {"remove-input", "remove-cell"} & set(tags), src
         if "overrides" in src:
             assert "hide-input" in tags or "remove-input" in tags

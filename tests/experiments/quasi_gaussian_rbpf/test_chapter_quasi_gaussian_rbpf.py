@@ -58,7 +58,9 @@ def test_page_structure():
         if cell["cell_type"] != "code" or "parameters" in _tags(cell):
             continue
         assert "result.data" not in src and len(cell["source"]) <= 25
-        if re.search(r"save_figure\(|write_outputs\(|glue\(", src):
+        if re.search(r"save_figure\(", src):             # the code of a figure: one click away
+            assert {"hide-input", "remove-output"} <= _tags(cell), src
+        elif re.search(r"write_outputs\(|glue\(", src):  # plumbing: hidden
             assert {"remove-input", "remove-cell"} & _tags(cell), src
         if not HIDDEN & _tags(cell):
             for name in ("overrides", "out_dir", "quick"):
