@@ -31,6 +31,7 @@ from railpaper.engine.particles import systematic_resample
 from railpaper.engine.rbpf import run_filter
 from railpaper.stats import median_interval
 from railpaper.threads import one_thread
+from railpaper.timing import interleaved
 
 #: Filters timed in the paired repeats: the RBPF, then the Q-GRBPF under both readings.
 PAIRED = ("rbpf", "qgrbpf", "qgrbpf_printed")
@@ -82,16 +83,16 @@ def median_step_seconds(make_filter: Callable, name: str, n: int, y: np.ndarray,
 def paired_samples(p: dict, make_filter: Callable, y: np.ndarray) -> pd.DataFrame:
     """One row per paired repeat: median seconds per step of each :data:`PAIRED` filter and
     of one resampling, at ``timing_ratio_particles``, measured back to back."""
-    n = p["timing_ratio_particles"]
+    n, repeats = p["timing_ratio_particles"], p["timing_ratio_repeats"]
     rng = np.random.default_rng([p["seed"], 20_000])
-    rows = []
-    for r in range(p["timing_ratio_repeats"]):
-        row = {"repeat": r}
-        for name in PAIRED:
-            row[name] = median_step_seconds(make_filter, name, n, y, 20_000 + r)
-        row["resampling"] = resampling_seconds(n, rng)
-        rows.append(row)
-    return pd.DataFrame(rows)
+
+    def timed(name: str) -> Callable[[], float]:
+        index = iter(range(repeats))                  # repeat r: particles and stream 20000 + r
+        return lambda: median_step_seconds(make_filter, name, n, y, 20_000 + next(index))
+
+    runs = {name: timed(name) for name in PAIRED}
+    runs["resampling"] = lambda: resampling_seconds(n, rng)
+    return pd.DataFrame({"repeat": range(repeats), **interleaved(runs, repeats)})
 
 
 def paired_metrics(samples: pd.DataFrame) -> dict:
