@@ -1,1 +1,2 @@
-"""Pipeline: papermill runs, outputs, tolerances, book build."""
+"""Pipeline: papermill runs, outputs, progress, claims and ledger, tolerances and bands, book
+build, sweeps."""
