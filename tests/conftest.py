@@ -1,16 +1,14 @@
-"""Shared fixtures: every quick chapter runs once per test session, and so does the quick book.
+"""Shared fixtures: the quick book, built once per test session, and the quick runs read from it.
 
 The quick book (:func:`railpaper.pipeline.book.build_book` with ``quick=True``: the four chapters
 through papermill, the quick bench, ``jupyter-book -W -n``) is what CI must prove builds; its
 chapter folders are also the quick runs every chapter test reads.  It is started in a background
 process as soon as the tests are collected, so it runs on the second core while the unit tests
-run on the first; the first test that needs it waits for it.  In-process quick results
-(``chapter.run(quick=True)`` at the defaults) are cached the same way, once per session.
+run on the first; the first test that needs it waits for it.
 """
 
 from __future__ import annotations
 
-import importlib
 import os
 import shutil
 import subprocess
@@ -110,19 +108,3 @@ def quick_run_dir(tmp_path_factory):
         return cache[chapter]
 
     return run
-
-
-@pytest.fixture(scope="session")
-def quick_result():
-    """chapter package name -> (resolved quick parameters, ``run(quick=True)`` result), each
-    computed once per session in this process."""
-    cache: dict[str, tuple] = {}
-
-    def result(package: str):
-        if package not in cache:
-            chapter = importlib.import_module(f"railpaper.experiments.{package}")
-            params = chapter.SPEC.resolve({}, quick=True)
-            cache[package] = params, chapter.run(quick=True, **params)
-        return cache[package]
-
-    return result
