@@ -49,17 +49,16 @@ def settling_step(ok, never: int = -1, axis: int = 0):
     """First step (1-based) from which ``ok`` holds to the end; ``never`` where it fails at the
     last step (-1, or ``K + 1`` so that a run that never settles ranks after every one that does).
     """
-    index = settled_index(ok, axis)
-    step = np.where(np.asarray(index) < 0, never, np.asarray(index) + 1)
+    index = np.asarray(settled_index(ok, axis))
+    step = np.where(index < 0, never, index + 1)
     return int(step) if step.ndim == 0 else step
 
 
 def settling_time_s(t_s, ok, axis: int = 0):
     """Time (s, from ``t_s`` of shape (K,)) of the first sample from which ``ok`` holds to the
     end; -1.0 where it fails at the last sample."""
-    index = settled_index(ok, axis)
-    t_s = np.asarray(t_s, dtype=float)
-    time = np.where(np.asarray(index) < 0, -1.0, t_s[np.maximum(index, 0)])
+    index = np.asarray(settled_index(ok, axis))
+    time = np.where(index < 0, -1.0, np.asarray(t_s, dtype=float)[np.maximum(index, 0)])
     return float(time) if time.ndim == 0 else time
 
 

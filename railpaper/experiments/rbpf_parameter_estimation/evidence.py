@@ -2,11 +2,12 @@
 
 The chapter filters many independent records (seeds ``seed``, ``seed + 1``, …): ``toy_seeds``
 records of the Eq. (18) toy and ``n_records`` records of the lateral vehicle.  These functions turn
-the per-record results into the metrics the claim rules of
-``data/rbpf-parameter-estimation/claims.toml`` read: rates with Clopper–Pearson intervals, medians
-of paired differences with order-statistic intervals, and the largest bias over the five lateral
-parameters with a simultaneous (Bonferroni) t interval.  Every interval comes from
-:mod:`railpaper.stats`; nothing here decides a verdict.
+the toy's per-record results into the metrics the claim rules of
+``data/rbpf-parameter-estimation/claims.toml`` read (rates with Clopper–Pearson intervals, medians
+of paired differences with order-statistic intervals) and the evidence table of the page; the
+metrics of a stack of lateral runs are
+:func:`railpaper.experiments.rbpf_parameter_estimation.lateral.lateral_metrics`.  Every interval
+comes from :mod:`railpaper.stats`; nothing here decides a verdict.
 """
 
 from __future__ import annotations
@@ -14,8 +15,6 @@ from __future__ import annotations
 import pandas as pd
 
 from railpaper.stats import median_interval, rate
-
-LEVEL = 0.95
 
 
 # ----------------------------------------------------------------------------- toy, Eq. (18)
