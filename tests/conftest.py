@@ -4,7 +4,7 @@ The quick book (:func:`railpaper.pipeline.book.build_book` with ``quick=True``: 
 through papermill, the quick bench, ``jupyter-book -W -n``) is what CI must prove builds; its
 chapter folders are also the quick runs every chapter test reads.  It is started in a background
 process as soon as the tests are collected, so it runs on the second core while the unit tests
-run on the first; the first test that needs it waits for it.
+run on the first; the modules that read it run last, and the first of them waits for it.
 """
 
 from __future__ import annotations
@@ -43,6 +43,14 @@ def _start_quick_book() -> None:
                                stderr=subprocess.STDOUT,
                                env=dict(os.environ, PYTHONWARNINGS="ignore"))
     _BUILD.update(root=root, book=book, log=log, process=process)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Modules that read the quick book run last (each module's own order kept, so its module
+    fixtures are set up once): the other tests then fill the first core while the book builds."""
+    reads_book = {item.module for item in items
+                  if BOOK_FIXTURES & set(getattr(item, "fixturenames", ()))}
+    items.sort(key=lambda item: item.module in reads_book)
 
 
 def pytest_collection_finish(session):
@@ -91,20 +99,3 @@ def quick_chapter_dir(quick_book):
         assert (out / "metrics.json").exists(), f"the quick book has no run of {chapter}"
         return out
     return folder
-
-
-@pytest.fixture(scope="session")
-def quick_run_dir(tmp_path_factory):
-    """Run a chapter with ``railpaper run --quick`` once (its page included); returns a function
-    chapter -> dir."""
-    cache: dict[str, Path] = {}
-
-    def run(chapter: str) -> Path:
-        if chapter not in cache:
-            out = tmp_path_factory.mktemp(chapter) / "run"
-            result = railpaper_cli("run", chapter, "--quick", "--out", str(out))
-            assert result.returncode == 0, result.stderr[-2000:]
-            cache[chapter] = out
-        return cache[chapter]
-
-    return run

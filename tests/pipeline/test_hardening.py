@@ -2,13 +2,14 @@
 (``railpaper: error: ...``), a stated exit status, no traceback, and leaves the last good
 outputs byte-identical.  Interrupts (SIGINT, SIGTERM) and a second run of the same chapter too.
 
-The bad-input matrix runs the CLI in subprocesses, three at a time (one module fixture), and each
-case is its own test asserting on its result.  Run-level cases use the cheapest chapter
+The bad-input matrix runs every case through the CLI's entry point in one interpreter of its own
+(one module fixture), and each case is its own test asserting on its result.  Run-level cases use the cheapest chapter
 (reduced-order-observer) with --quick and a one-speed configuration.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import shutil
@@ -16,7 +17,6 @@ import signal
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -280,24 +280,49 @@ def _prepare(case: str, args: list[str], root: Path) -> tuple[list[str], Path]:
     return filled, root
 
 
+# One interpreter runs every case through ``railpaper.cli.main`` in turn, each with its own
+# stderr, exit status and working directory (the repository, as for a user's `railpaper`): the
+# cases then share one import of the package instead of paying it sixty times.  The exit-status
+# and one-line path of the real executable is the same function (``python -m railpaper`` calls
+# ``sys.exit(main())``); tests/pipeline/test_cli.py runs its cases as separate processes.
+_DRIVER = r"""
+import contextlib, io, json, os, sys, traceback
+os.chdir(sys.argv[1])
+from railpaper import cli
+out = []
+for argv in json.load(sys.stdin):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            status = cli.main(argv)
+        except SystemExit as exc:                # argparse's usage errors
+            status = exc.code if isinstance(exc.code, int) else 1
+        except BaseException:                    # a traceback a user would have seen
+            traceback.print_exc()
+            status = 1
+    out.append([status, err.getvalue()])
+with open(sys.argv[2], "w") as handle:
+    json.dump(out, handle)
+"""
+
+
 @pytest.fixture(scope="module")
 def outcomes(tmp_path_factory):
-    """Every matrix case run once through the CLI (three subprocesses at a time), with the bytes
-    of its root folder before and after."""
+    """Every matrix case run once through the CLI's entry point (one interpreter for all, in a
+    process of its own), with the bytes of its root folder before and after."""
     base = tmp_path_factory.mktemp("hardening")
-
-    def one(case_args):
-        case, args = case_args
-        filled, root = _prepare(case, args, base / case)
-        before = snapshot(root)
-        try:
-            result = railpaper_cli(*filled, timeout=60)
-        except subprocess.TimeoutExpired:
-            result = subprocess.CompletedProcess(filled, -1, "", "timed out after 60 s")
-        return case, (result, before, snapshot(root), root)
-
-    with ThreadPoolExecutor(max_workers=3) as pool:
-        return dict(pool.map(one, [(case, args) for case, args, _, _ in MATRIX]))
+    prepared = {case: _prepare(case, args, base / case) for case, args, _, _ in MATRIX}
+    before = {case: snapshot(root) for case, (_, root) in prepared.items()}
+    answers = base / "answers.json"
+    driver = subprocess.run([sys.executable, "-c", _DRIVER, str(REPO), str(answers)],
+                            input=json.dumps([filled for filled, _ in prepared.values()]),
+                            capture_output=True, text=True, timeout=600,
+                            env=dict(os.environ, PYTHONWARNINGS="ignore"))
+    assert driver.returncode == 0, driver.stderr[-3000:]
+    results = json.loads(answers.read_text())
+    return {case: (subprocess.CompletedProcess(filled, status, "", stderr), before[case],
+                   snapshot(root), root)
+            for (case, (filled, root)), (status, stderr) in zip(prepared.items(), results)}
 
 
 def assert_one_error_line(result, status: int, words) -> str:

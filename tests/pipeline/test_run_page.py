@@ -3,17 +3,34 @@ web page with its figures, typeset math and the claims judged on this run."""
 
 import json
 import re
+import shutil
 
 import pytest
 from conftest import railpaper_cli
 from test_book import rendered_dom
 
+from railpaper.pipeline.chapters import chapter_spec
+from railpaper.pipeline.page import render_run_page
+
 pytestmark = pytest.mark.slow
 CHAPTER = "partial-state-observer"
+#: The cheapest chapter, for the run that goes through the whole command.
+CHEAP_CHAPTER = "reduced-order-observer"
 
 
-def test_run_page_renders_offline(quick_run_dir, tmp_path):
-    out = quick_run_dir(CHAPTER)
+@pytest.fixture(scope="module")
+def run_with_page(quick_chapter_dir, tmp_path_factory):
+    """The quick book's run of the chapter with its run page rendered, as ``railpaper run``
+    renders it once the notebook has executed (:func:`railpaper.pipeline.chapters.run_chapter`)."""
+    out = tmp_path_factory.mktemp("page") / "run"
+    shutil.copytree(quick_chapter_dir(CHAPTER), out)
+    spec = chapter_spec(CHAPTER)
+    render_run_page(out, spec.notebook, spec.title)
+    return out
+
+
+def test_run_page_renders_offline(run_with_page, tmp_path):
+    out = run_with_page
     index = out / "index.html"
     target = re.search(r'url=([^"]+)"', index.read_text()).group(1)
     page = out / target
@@ -30,9 +47,10 @@ def test_run_page_renders_offline(quick_run_dir, tmp_path):
 
 def test_run_page_marks_non_default_parameters(tmp_path):
     out = tmp_path / "run"
-    result = railpaper_cli("run", CHAPTER, "--quick", "-p", "seed", "3", "--out", str(out))
+    result = railpaper_cli("run", CHEAP_CHAPTER, "--quick", "-p", "seed", "3", "--out", str(out))
     assert result.returncode == 0, result.stderr[-2000:]
     assert json.loads((out / "metrics.json").read_text())["parameters"]["seed"] == 3
+    assert (out / "index.html").exists()
     html = next((out / "page").glob("*.html"), None)
-    text = (out / "page" / "partial_state_observer.html").read_text()
+    text = (out / "page" / "reduced_order_observer.html").read_text()
     assert html is not None and "Non-default parameters: seed." in text

@@ -2,9 +2,6 @@
 
 import json
 import math
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +13,6 @@ from railpaper.experiments.partial_state_observer.spec import SPEC
 from railpaper.pipeline.claim_rules import check_row, is_untestable
 from railpaper.pipeline.outputs import chapter_data_dir, claims, errata_table
 
-ROOT = Path(__file__).resolve().parents[3]
 SPEEDS = ("60kmh", "80kmh", "120kmh", "160kmh")
 
 
@@ -149,12 +145,9 @@ def test_quick_metrics_within_tolerances(quick_run):
 
 
 @pytest.mark.slow
-def test_notebook_quick_through_papermill(tmp_path):
-    out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "papermill", str(ROOT / "book/notebooks/partial_state_observer.ipynb"),
-           str(tmp_path / "run.ipynb"), "-p", "quick", "True", "-p", "out_dir", str(out),
-           "-k", "python3", "--cwd", str(ROOT)]
-    subprocess.run(cmd, check=True, capture_output=True, timeout=300)
+def test_notebook_quick_through_papermill(quick_chapter_dir):
+    """The quick book's papermill run of the notebook (tests/conftest.py)."""
+    out = quick_chapter_dir("partial-state-observer")
     run = json.loads((out / "metrics.json").read_text())
     assert run["chapter"] == "partial-state-observer" and run["quick"] is True
     assert all(not (isinstance(v, float) and math.isnan(v)) for v in run["metrics"].values())

@@ -148,7 +148,8 @@ def test_page_has_numbered_figures_and_no_stray_output(quick_chapter_dir):
 def test_rerun_with_other_speeds_keys_metrics_by_speed(tmp_path):
     out = tmp_path / "run"
     result = railpaper_cli("run", CHAPTER, "--quick", "-p", "speeds_kmh", "[80, 140]",
-                           "-p", "sweep_speeds_kmh", "[80]", "--out", str(out))
+                           "-p", "sweep_speeds_kmh", "[80]", "-p", "mc_seeds", "2",
+                           "--out", str(out))
     assert result.returncode == 0, result.stderr[-2000:]
     metrics = json.loads((out / "metrics.json").read_text())["metrics"]
     assert "convergence_time_s_80kmh" in metrics and "force_rms_error_N_140kmh" in metrics
