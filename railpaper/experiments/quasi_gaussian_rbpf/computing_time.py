@@ -12,6 +12,10 @@ Two measurements, both on the chapter's main record:
   sees cancels; the median over repeats comes with its distribution-free 95 % interval
   (:func:`railpaper.stats.median_interval`).
 
+The claims on computing time are decided on a third measure that no machine load moves: the
+**operations per step** each algorithm does, counted from its steps (:func:`operations_per_step`);
+the wall clock is shown beside it.
+
 Everything is timed on one thread (:func:`railpaper.threads.one_thread`): the comparison is of
 the work each algorithm does per step, and a parallel Kalman bank on a machine busy with other
 processes spends most of its time waiting for its threads, which would swamp the resampling
@@ -27,6 +31,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
+from railpaper.engine.kalman_bank import multiply_adds
 from railpaper.engine.particles import systematic_resample
 from railpaper.engine.rbpf import run_filter
 from railpaper.stats import median_interval
@@ -36,6 +41,53 @@ from railpaper.timing import interleaved
 #: Filters timed in the paired repeats: the RBPF, then the Q-GRBPF under both readings.
 PAIRED = ("rbpf", "qgrbpf", "qgrbpf_printed")
 RESAMPLING_CALLS = 20
+
+
+def operations_per_step(name: str, n_particles: int, n: int, p: int, d: int, m: int = 0
+                        ) -> dict[str, int]:
+    """Floating-point operations of one step of filter ``name`` (``rbpf``: the paper scheme,
+    resample and move every step; ``qgrbpf``, ``qgrbpf_printed``: paper 004's Steps (1)-(6)),
+    counted from the algorithm, by part.
+
+    Counting convention: a multiply-add, a comparison, an exp/log or one random variate is one
+    operation; copying a number is one.  N particles, state dimension n, p measurements, m
+    inputs, d parameters.  Both filters share the Kalman bank (one prediction and update per
+    particle, :func:`railpaper.engine.kalman_bank.multiply_adds`), the weights (max, exp, sum:
+    3N, ESS 2N), the parameter moments (mean N d, centring N d, covariance N d²), the state's
+    mixture moments (5 N n) and the new matrices of the N new parameter vectors (N n² entries
+    of F(θ)).  The RBPF adds systematic resampling (cumulative sum N, merge N, one uniform,
+    copies N (d + n + n²)) and the Liu–West move (Cholesky d³/6, shrinkage 2 N d, draws N d,
+    L z: N d(d+1)/2).  The Q-GRBPF adds the weight threshold (2N), the Gaussian draws of Eq. 9
+    (Cholesky d³/6, N d variates, L z N d(d+1)/2), the weights of Eqs. 10-11 (3N; the printed
+    reading also evaluates the density of each draw, N (d(d+1)/2 + 2d)) and the search of
+    Eqs. 16-17 (N uniforms, cumulative sum N, N ⌈log₂ N⌉ comparisons, copies N (d + n + n²)).
+    """
+    N = n_particles
+    log2 = int(np.ceil(np.log2(max(N, 2))))
+    common = {"kalman bank": N * multiply_adds(n, p, m), "weights": 5 * N,
+              "parameter moments": N * (2 * d + d * d), "state moments": 5 * N * n,
+              "new matrices": N * n * n}
+    copies = N * (d + n + n * n)
+    draws = d ** 3 // 6 + N * d + N * d * (d + 1) // 2
+    if name == "rbpf":
+        return {**common, "resampling (systematic)": 2 * N + 1 + copies,
+                "Liu-West move": draws + 2 * N * d}
+    if name in ("qgrbpf", "qgrbpf_printed"):
+        density = N * (d * (d + 1) // 2 + 2 * d) if name == "qgrbpf_printed" else 0
+        return {**common, "weight threshold": 2 * N, "Gaussian draws (Eq. 9)": draws,
+                "weights of Eqs. 10-11": 3 * N + density,
+                "search (Eqs. 16-17)": N + N + N * log2 + copies}
+    raise ValueError(f"no operation count for filter {name!r}")
+
+
+def operation_metrics(n_particles: int, n: int, p: int, d: int, m: int = 0) -> dict:
+    """``operations_per_step_<f>`` of every :data:`PAIRED` filter at ``n_particles`` and
+    ``operation_ratio_<q>_over_rbpf`` of each Q-GRBPF reading (deterministic: metrics.json)."""
+    totals = {f: sum(operations_per_step(f, n_particles, n, p, d, m).values()) for f in PAIRED}
+    out = {f"operations_per_step_{f}": totals[f] for f in PAIRED}
+    for q in PAIRED[1:]:
+        out[f"operation_ratio_{q}_over_rbpf"] = totals[q] / totals["rbpf"]
+    return out
 
 
 def resampling_seconds(n: int, rng: np.random.Generator, calls: int = RESAMPLING_CALLS) -> float:

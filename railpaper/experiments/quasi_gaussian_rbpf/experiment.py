@@ -41,7 +41,7 @@ from railpaper.experiments.base import (
     default_progress,
     no_progress,
 )
-from railpaper.experiments.quasi_gaussian_rbpf.computing_time import timing
+from railpaper.experiments.quasi_gaussian_rbpf.computing_time import operation_metrics, timing
 from railpaper.experiments.quasi_gaussian_rbpf.evidence import (
     descriptive_metrics,
     evidence_metrics,
@@ -285,6 +285,9 @@ def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
     metrics.update(evidence_metrics(mc_table, {"a": p["a_true"], "b": p["b_true"]}))
     metrics["grid_min_std_over_spacing"] = main.exact.min_std_over_spacing
     metrics["grid_edge_mass"] = main.exact.edge_mass
+    model = paper004_system(p["q_var"], p["r_var"])(np.zeros((1, 2)))
+    (n_state, _), (n_meas, _) = model.F.shape[-2:], model.H.shape[-2:]
+    metrics.update(operation_metrics(p["timing_ratio_particles"], n=n_state, p=n_meas, d=2))
     timings, timing_table, timing_samples = (_timing(p, main.measurements, progress)
                                              if p["timing"] else ({}, None, None))
     timings["monte_carlo_seconds"] = mc_seconds
