@@ -7,6 +7,9 @@ the same bytes in ``metrics.json``:
   (the binomial(n, 1/2) quantiles pick the ranks);
 * :func:`proportion_interval` — a rate k/n with the Clopper–Pearson (exact binomial) interval;
 * :func:`mean_interval` — the mean with Student's t interval;
+* :func:`prediction_interval` — where a single run falls: the central 95 % of the records
+  (their 2.5 % and 97.5 % quantiles), each quantile with its own order-statistic confidence
+  interval, for claims a paper read off one run (is its number a plausible draw?);
 * :func:`paired_trend` — a trend over ordered levels (speeds) measured on the same seeds: the
   per-seed Spearman correlation between level and value, its median with an order-statistic
   interval, and the two-sided sign-test p-value of "as many seeds rise as fall".
@@ -83,6 +86,64 @@ def proportion_interval(k: int, n: int, level: float = LEVEL) -> Estimate:
     low = 0.0 if k == 0 else float(_st.beta.ppf(alpha / 2, k, n - k + 1))
     high = 1.0 if k == n else float(_st.beta.ppf(1 - alpha / 2, k + 1, n - k))
     return Estimate(k / n, low, high, int(n), level)
+
+
+def quantile_ranks(n: int, p: float, level: float = LEVEL) -> tuple[int, int]:
+    """1-based ranks (l, u) of the distribution-free interval [x_(l), x_(u)] of the p-quantile.
+
+    With B ~ Binomial(n, p) the number of samples below the quantile, P(x_(l) <= ξ_p <= x_(u))
+    >= P(l <= B <= u − 1); l is the largest rank with P(B <= l − 1) <= (1 − level)/2 and u the
+    smallest with P(B >= u) <= (1 − level)/2.  A rank that does not exist at this n (l < 1 or
+    u > n) is clipped to the sample's minimum or maximum, whose coverage at that end is then
+    below ``level`` (the interval says "no record went further", not more).
+    """
+    alpha = (1 - level) / 2
+    low = int(_st.binom.ppf(alpha, n, p))             # smallest k with cdf(k) >= alpha
+    if _st.binom.cdf(low, n, p) > alpha:
+        low -= 1                                      # cdf(low) <= alpha, or low = -1
+    high = int(_st.binom.ppf(1 - alpha, n, p))        # smallest k with cdf(k) >= 1 - alpha
+    return max(low + 1, 1), min(high + 1, n)
+
+
+@dataclass(frozen=True)
+class PredictionInterval:
+    """The central ``coverage`` of the records: quantiles ``low`` and ``high`` (each a record's
+    value), with the ``level`` interval of each quantile, over ``n`` records."""
+
+    low: float
+    low_low: float
+    low_high: float
+    high: float
+    high_low: float
+    high_high: float
+    n: int
+    coverage: float = 0.95
+
+    def metrics(self, name: str) -> dict[str, float | int]:
+        """``{name_p025, name_p025_low, name_p025_high, name_p975, …_low, …_high}`` (the
+        quantile names are those of the default 95 % coverage)."""
+        return {f"{name}_p025": self.low, f"{name}_p025_low": self.low_low,
+                f"{name}_p025_high": self.low_high, f"{name}_p975": self.high,
+                f"{name}_p975_low": self.high_low, f"{name}_p975_high": self.high_high}
+
+
+def prediction_interval(samples, coverage: float = 0.95, level: float = LEVEL
+                        ) -> PredictionInterval:
+    """Central ``coverage`` prediction interval of one more record, from the records' quantiles.
+
+    A paper's number read off one run is a plausible draw when it lies inside
+    [q_(1−c)/2, q_(1+c)/2]; each quantile is the record at rank ⌈n·q⌉ (the inverted empirical
+    cdf) and carries the order-statistic interval of :func:`quantile_ranks`, so a rule can tell
+    "inside even the narrowest interval our n allows" from "outside even the widest".
+    """
+    x = np.sort(_finite(samples, "prediction_interval"))
+    n = x.size
+    ends = []
+    for q in ((1 - coverage) / 2, (1 + coverage) / 2):
+        point = float(np.quantile(x, q, method="inverted_cdf"))
+        lo_rank, hi_rank = quantile_ranks(n, q, level)
+        ends += [point, float(x[lo_rank - 1]), float(x[hi_rank - 1])]
+    return PredictionInterval(*ends, n=n, coverage=coverage)
 
 
 def mean_interval(samples, level: float = LEVEL) -> Estimate:

@@ -18,6 +18,14 @@ One table of a claims file is one ledger row: one claim of a paper under one rea
     n_samples = "metric_n"    # Monte Carlo samples behind it ... or: deterministic = true
     min_samples = 110         # optional: fewer samples than this give "undecided" (the size at
                               # which disjoint seed batches agree on the verdict)
+    kind = "population"       # single-run | population | deterministic | design | implementation
+    method = "..."            # optional: the method that is not the paper's (exact posterior, our
+                              # scheme, a matched design); such a row says "attainable", never
+                              # "reproduced", and the headline does not count it
+    deciding = [["a_low", "a_high"], ...]      # optional: the deciding intervals (default: interval)
+    [convergence_slower_with_speed.revised_after_evidence]   # a rule changed after its numbers
+    what = "..."; when = "2026-12-01"; why = "..."           # were seen, and the original rule:
+    original = {min_samples = 0, cases = [...], otherwise = {...}}   # missing keys: as revised
     [[convergence_slower_with_speed.cases]]    # tried in order; the first whose conditions hold
     verdict = "reproduced"    # reproduced | artefact | differs | undecided | not testable
     reason = "... {metric:.3g} ..."            # str.format over the run's metrics
@@ -28,6 +36,18 @@ One table of a claims file is one ledger row: one claim of a paper under one rea
 A row that cannot be tested has only ``[key.otherwise] verdict = "not testable"`` and a reason;
 one whose verdict flips between disjoint seed batches at the book's sample size may state
 ``verdict = "undecided"`` the same way.
+
+Kinds fix the statistic (the intro defines them for readers): *single-run* (a number the paper
+read off one run: is it a plausible draw from our records? decided on a prediction interval over
+records, see :func:`railpaper.stats.prediction_interval`), *population* (a rate, trend or absolute
+word: a Monte Carlo statistic and its confidence interval), *deterministic* (exact),
+*design* (a number our own design choice sets: not a finding) and *implementation* (timing: an
+operation count decides, the wall clock is shown beside it).
+
+The vocabulary is enforced here, not left to each rule: a row whose rule would say a decided
+verdict while one of its deciding intervals straddles a threshold the deciding conditions read
+(:func:`straddled_thresholds`) says ``undecided`` instead, with the interval and the threshold in
+its reason.
 
 Condition tests (every metric of ``metrics`` must pass; the reference is ``reference`` (a metric),
 else ``value``, else the row's ``paper_value``): ``within_abs`` (|m − ref| ≤ tolerance),
@@ -45,13 +65,20 @@ from railpaper.data import DataError
 #: Verdicts a rule can give, in the order the ledger counts them.  ``undecided``: our evidence at
 #: the book's sample size cannot decide (the interval straddles the rule's threshold, or the
 #: verdict flips between disjoint seed batches); ``not testable``: the evidence needed is lost.
-RULE_VERDICTS = ("reproduced", "artefact", "differs", "undecided", "not testable")
+#: ``attainable``: a method that is not the paper's (a row with ``method``) shows the claim.
+RULE_VERDICTS = ("reproduced", "attainable", "artefact", "differs", "undecided", "not testable")
+#: Verdicts that decide (the rest say the evidence cannot).
+DECIDED_VERDICTS = ("reproduced", "attainable", "artefact", "differs")
+KINDS = ("single-run", "population", "deterministic", "design", "implementation")
+REVISION_KEYS = {"what", "when", "why", "original"}
+ORIGINAL_KEYS = {"cases", "otherwise", "min_samples"}
 #: Verdicts a row may state without any case (a fixed outcome, said why in its reason).
 FIXED_VERDICTS = ("undecided", "not testable")
 TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
 ROW_KEYS = {"claim", "source", "group", "reading", "reading_parameter", "rule", "justification",
             "paper_value", "unit", "primary", "primary_unit", "statistic", "interval",
-            "n_samples", "min_samples", "deterministic", "metrics", "cases", "otherwise"}
+            "n_samples", "min_samples", "deterministic", "metrics", "cases", "otherwise",
+            "kind", "method", "deciding", "revised_after_evidence"}
 
 
 def is_untestable(row: dict) -> bool:
@@ -71,6 +98,30 @@ def check_row(key: str, row: dict, where: str) -> None:
     for needed in ("claim", "source"):
         if not row.get(needed):
             fail(f"needs '{needed}'")
+    if row.get("kind") not in KINDS:
+        fail(f"needs 'kind', one of {', '.join(KINDS)}")
+    if row["kind"] == "deterministic" and not (row.get("deterministic") or is_untestable(row)):
+        fail("kind 'deterministic' needs 'deterministic = true'")
+    verdicts = [c.get("verdict") for c in row.get("cases", [])] + [
+        row.get("otherwise", {}).get("verdict", "differs")]
+    if row.get("method") and "reproduced" in verdicts:
+        fail("a row about a method that is not the paper's ('method') says 'attainable', "
+             "never 'reproduced'")
+    if not row.get("method") and "attainable" in verdicts:
+        fail("'attainable' is for a method that is not the paper's: name it in 'method'")
+    revision = row.get("revised_after_evidence")
+    if revision is not None:
+        if not isinstance(revision, dict) or set(revision) - REVISION_KEYS or not all(
+                revision.get(k) for k in ("what", "when", "why")):
+            fail("'revised_after_evidence' needs 'what', 'when', 'why' (and 'original')")
+        original = revision.get("original", {})
+        if not isinstance(original, dict) or not original or set(original) - ORIGINAL_KEYS:
+            fail("'revised_after_evidence.original' states the original rule: some of "
+                 f"{', '.join(sorted(ORIGINAL_KEYS))}")
+    deciding = row.get("deciding")
+    if deciding is not None and (not isinstance(deciding, list) or not all(
+            isinstance(p, list) and len(p) == 2 for p in deciding)):
+        fail("'deciding' must be a list of [low_metric, high_metric]")
     otherwise = row.get("otherwise", {})
     if otherwise.get("verdict", "differs") not in RULE_VERDICTS or (
             otherwise and "reason" not in otherwise):
@@ -104,6 +155,8 @@ def rule_metrics(row: dict) -> list[str]:
     """Every metric a row's verdict and its "ours" read: primary, interval, n_samples, conditions."""
     names = [row["primary"]] if "primary" in row else []
     names += list(row.get("interval", []))
+    for pair in row.get("deciding", []):
+        names += list(pair)
     if "n_samples" in row:
         names.append(row["n_samples"])
     names += condition_metrics(row)
@@ -152,16 +205,121 @@ def too_few_samples(row: dict, n) -> str:
             "disjoint batches of seeds disagree on the verdict; this run's statistic is shown")
 
 
+def deciding_intervals(row: dict) -> list[tuple[str, str]]:
+    """The row's deciding intervals as (low metric, high metric): ``deciding``, else
+    ``interval``, else none (a deterministic row)."""
+    if "deciding" in row:
+        return [tuple(pair) for pair in row["deciding"]]
+    return [tuple(row["interval"])] if "interval" in row else []
+
+
+def _interval_metrics(row: dict, pair: tuple[str, str]) -> set[str]:
+    """The metrics one deciding interval stands for: its ends, and the primary statistic when
+    the pair is the row's ``interval``."""
+    names = set(pair)
+    if tuple(row.get("interval", ())) == tuple(pair) and "primary" in row:
+        names.add(row["primary"])
+    return names
+
+
+def condition_thresholds(cond: dict, row: dict, values: dict) -> list[float]:
+    """The values at which one condition changes: range bounds, reference ± tolerance,
+    reference ÷× factor, the reference of ``equals``; none for ``increasing`` (it compares
+    metrics with each other)."""
+    test = cond["test"]
+    if test == "increasing":
+        return []
+    if test == "range":
+        return [float(cond[k]) for k in ("min", "max", "above", "below")
+                if k in cond and math.isfinite(cond[k])]
+    ref = float(_reference(cond, row, values))
+    if test == "equals":
+        return [ref]
+    if test == "within_abs":
+        return [ref - cond["tolerance"], ref + cond["tolerance"]]
+    return [ref / cond["factor"], ref * cond["factor"]]
+
+
+def _cases_up_to(row: dict, case_index: int | None) -> list[dict]:
+    cases = row.get("cases", [])
+    return cases if case_index is None else cases[:case_index + 1]
+
+
+def straddled_thresholds(row: dict, values: dict, case_index: int | None
+                         ) -> list[tuple[str, str, float]]:
+    """(low metric, high metric, threshold) for every threshold strictly inside a deciding
+    interval on this run.
+
+    The thresholds are those of the conditions that read the interval (its ends or, for the
+    row's ``interval``, its primary) in the cases up to the one that decided (``case_index``;
+    None: no case held, so every case's).  Any of them inside the interval means a value of the
+    statistic inside its own interval would be judged otherwise: the intro calls that
+    *undecided*.
+    """
+    out = []
+    for pair in deciding_intervals(row):
+        names = _interval_metrics(row, pair)
+        low, high = values[pair[0]], values[pair[1]]
+        for case in _cases_up_to(row, case_index):
+            for cond in case.get("when", []):
+                if names & set(cond["metrics"]):
+                    out += [(pair[0], pair[1], t) for t in condition_thresholds(cond, row, values)
+                            if low < t < high]
+    return list(dict.fromkeys(out))
+
+
+def straddle_reason(row: dict, values: dict, found: list[tuple[str, str, float]],
+                    verdict: str) -> str:
+    """The reason template of a row made undecided because its interval straddles a threshold."""
+    low_name, high_name, t = found[0]
+    n = f", n = {{{row['n_samples']}}}" if "n_samples" in row else ""
+    return (f"cannot tell: the 95 % interval [{values[low_name]:.4g}, {values[high_name]:.4g}]"
+            f"{n} straddles the rule's threshold {t:.4g} (the rule alone would say {verdict})")
+
+
+def rule_verdict(row: dict, values: dict) -> tuple[str, str, int | None]:
+    """(verdict, reason template, index of the deciding case or None) of the rule alone: the
+    first case that holds, else ``otherwise``; before the vocabulary is applied."""
+    for index, case in enumerate(row.get("cases", [])):
+        if all(holds(cond, row, values) for cond in case.get("when", [])):
+            return case["verdict"], case["reason"], index
+    fallback = row.get("otherwise", {})
+    return fallback.get("verdict", "differs"), fallback.get("reason", ""), None
+
+
 def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
-    """(verdict, reason template) of the first case that holds, else the row's ``otherwise``;
-    ``undecided`` when the run has fewer samples than the row's ``min_samples``."""
+    """(verdict, reason template) of a row on a run's metric values.
+
+    ``undecided`` when the run has fewer samples than the row's ``min_samples``, or when the
+    rule's verdict is decided but a deciding interval straddles one of its thresholds
+    (:func:`straddled_thresholds`); else the rule's own verdict.
+    """
     if "min_samples" in row and values[row["n_samples"]] < row["min_samples"]:
         return "undecided", too_few_samples(row, values[row["n_samples"]])
-    for case in row.get("cases", []):
-        if all(holds(cond, row, values) for cond in case.get("when", [])):
-            return case["verdict"], case["reason"]
-    fallback = row.get("otherwise", {})
-    return fallback.get("verdict", "differs"), fallback.get("reason", "")
+    verdict, reason, index = rule_verdict(row, values)
+    if verdict in DECIDED_VERDICTS:
+        found = straddled_thresholds(row, values, index)
+        if found:
+            return "undecided", straddle_reason(row, values, found, verdict)
+    return verdict, reason
+
+
+def original_rule(row: dict) -> dict | None:
+    """The row as it stood before ``revised_after_evidence`` (None if never revised):
+    the original's ``cases``, ``otherwise`` and ``min_samples`` (0 = none) replace the row's."""
+    revision = row.get("revised_after_evidence")
+    if not revision:
+        return None
+    before = {k: v for k, v in row.items() if k != "revised_after_evidence"}
+    original = revision.get("original", {})
+    for key in ("cases", "otherwise"):
+        if key in original:
+            before[key] = original[key]
+    if "min_samples" in original:
+        before.pop("min_samples", None)
+        if original["min_samples"]:
+            before["min_samples"] = original["min_samples"]
+    return before
 
 
 # ---- over tolerance bands: three-valued logic (True, False, None = depends on where in the band)
@@ -220,10 +378,39 @@ def holds_over_bands(cond: dict, row: dict, bands: dict[str, tuple[float, float]
     return _tri_all(out)
 
 
+def _straddle_over_bands(row: dict, bands: dict[str, tuple[float, float]],
+                         case_index: int | None) -> bool | None:
+    """Whether a deciding interval straddles a threshold of the cases up to ``case_index`` for
+    every (True), no (False) or some (None) point of the bands."""
+    states = []
+    for pair in deciding_intervals(row):
+        names = _interval_metrics(row, pair)
+        (low_min, low_max), (high_min, high_max) = bands[pair[0]], bands[pair[1]]
+        for case in _cases_up_to(row, case_index):
+            for cond in case.get("when", []):
+                if not names & set(cond["metrics"]):
+                    continue
+                if "reference" in cond:          # thresholds move with the reference's band
+                    r_low, r_high = bands[cond["reference"]]
+                    spans = [tuple(sorted(ts)) for ts in zip(
+                        condition_thresholds(cond, row, {cond["reference"]: r_low}),
+                        condition_thresholds(cond, row, {cond["reference"]: r_high}))]
+                else:
+                    spans = [(t, t) for t in condition_thresholds(cond, row, {})]
+                for t_low, t_high in spans:
+                    states.append(True if low_max < t_low and t_high < high_min else
+                                  None if low_min < t_high and t_low < high_max else False)
+    if any(state is True for state in states):
+        return True
+    return None if any(state is None for state in states) else False
+
+
 def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set[str]:
     """Every verdict a run whose condition metrics lie anywhere in ``bands`` can get.
 
     One element: the bands decide the verdict, so a change that flips it fails the check.
+    A decided verdict whose deciding interval may straddle a threshold adds ``undecided``
+    (:func:`verdict_on_run` applies the same vocabulary on a run).
     """
     possible = set()
     if "min_samples" in row:
@@ -232,12 +419,21 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set
             return {"undecided"}
         if n_low < row["min_samples"]:
             possible.add("undecided")
-    for case in row.get("cases", []):
+
+    def add(verdict: str, case_index: int | None) -> None:
+        straddle = (_straddle_over_bands(row, bands, case_index)
+                    if verdict in DECIDED_VERDICTS else False)
+        if straddle is not True:
+            possible.add(verdict)
+        if straddle is not False:
+            possible.add("undecided")
+
+    for index, case in enumerate(row.get("cases", [])):
         state = _tri_all(holds_over_bands(c, row, bands) for c in case.get("when", []))
         if state is False:
             continue
-        possible.add(case["verdict"])
+        add(case["verdict"], index)
         if state is True:
             return possible
-    possible.add(row.get("otherwise", {}).get("verdict", "differs"))
+    add(row.get("otherwise", {}).get("verdict", "differs"), None)
     return possible

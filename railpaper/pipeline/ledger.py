@@ -6,10 +6,14 @@
 intro and each chapter's claims section call the same :func:`chapter_table`, so they cannot
 disagree; ``railpaper build`` also writes ``_generated/claims_ledger.csv``.
 
-Verdicts (defined for readers in the intro): ``reproduced``, ``artefact``, ``differs``,
-``undecided``, ``not testable``; and two states of a run rather than of a claim: ``missing`` (the chapter has
+Verdicts (defined for readers in the intro): ``reproduced``, ``attainable`` (a method that is
+not the paper's shows it), ``artefact``, ``differs``, ``undecided``, ``not testable``; and two states of a run rather than of a claim: ``missing`` (the chapter has
 not been run, or its run lacks a metric the rule reads) and, for rows built from a run with
 non-default parameters, the verdict is this run's and the table says so.
+
+Rows are readings; the headline counts *claims*: one row per claim (its ``group``), the first row
+of the group whose method is the paper's (its default reading).  Rows about a method that is not
+the paper's (``method``) are counted apart as *attainable* claims.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from railpaper.pipeline.claim_rules import (
     RULE_VERDICTS,
     check_row,
     is_untestable,
+    original_rule,
     rule_metrics,
     verdict_on_run,
 )
@@ -35,10 +40,11 @@ from railpaper.pipeline.outputs import claims
 
 VERDICTS = RULE_VERDICTS + ("missing",)
 #: HTML of each verdict in the tables: a coloured badge with an icon (book/_static/verdicts.css).
-VERDICT_ICONS = {"reproduced": "✔", "artefact": "⚠", "differs": "✘", "undecided": "?",
-                 "not testable": "∅", "missing": "–"}
-CSV_COLUMNS = ["chapter", "claim", "reading", "paper_value", "ours", "ours_low", "ours_high",
-               "n_samples", "verdict", "reason"]
+VERDICT_ICONS = {"reproduced": "✔", "attainable": "◇", "artefact": "⚠", "differs": "✘",
+                 "undecided": "?", "not testable": "∅", "missing": "–"}
+CSV_COLUMNS = ["chapter", "claim", "reading", "kind", "method", "headline", "paper_value", "ours",
+               "ours_low", "ours_high", "n_samples", "min_samples", "verdict", "reason",
+               "revised_after_evidence", "verdict_under_original_rule"]
 
 
 @dataclass
@@ -66,6 +72,12 @@ class LedgerRow:
     ours_low: object = None
     ours_high: object = None
     n_samples: object = None
+    kind: str = ""
+    method: str = ""
+    min_samples: object = None
+    headline: bool = False
+    revised: str = ""
+    original_verdict: str = ""
 
 
 def claims_label(chapter: str) -> str:
@@ -161,11 +173,27 @@ def chapter_rows(chapter: str, claims: dict[str, dict], run: dict | None,
             verdict, reason = "missing", "the chapter has not been run"
         else:
             verdict, reason = judge(row, values)
+        before, revised, original_verdict = original_rule(row), "", ""
+        if before is not None:
+            r = row["revised_after_evidence"]
+            revised = f"{r['when']}: {r['what']}. Why: {r['why']}"
+            original_verdict = ("missing" if run is None else judge(before, values)[0])
         rows.append(LedgerRow(chapter, key, row["claim"], row.get("source", ""), paper, ours,
                               verdict, reason, row.get("reading", ""), row.get("group", key),
                               row.get("statistic", ""), row.get("paper_value"), value, low,
-                              high, n))
+                              high, n, row["kind"], row.get("method", ""),
+                              row.get("min_samples"), False, revised, original_verdict))
+    mark_headlines(rows)
     return rows
+
+
+def mark_headlines(rows: list[LedgerRow]) -> None:
+    """Set ``headline`` on the first row of each claim (group) whose method is the paper's."""
+    seen = set()
+    for r in rows:
+        if not r.method and (r.chapter, r.group) not in seen:
+            seen.add((r.chapter, r.group))
+            r.headline = True
 
 
 def _read_json(path: Path) -> dict | None:
@@ -212,20 +240,78 @@ def verdict_badge(verdict: str) -> str:
 
 
 def summary(rows: list[LedgerRow]) -> str:
-    """``"3 reproduced, 1 differs"``: verdict counts in vocabulary order."""
+    """``"3 reproduced, 1 differs"``: verdict counts of these rows in vocabulary order."""
     counts = {v: sum(r.verdict == v for r in rows) for v in VERDICTS}
     return ", ".join(f"{n} {v}" for v, n in counts.items() if n)
 
 
-def chapter_table(rows: list[LedgerRow]) -> str:
-    """The MyST table of one chapter's rows: the same text in the intro and in the chapter."""
-    lines = ["| paper claim (where; reading) | paper | ours: statistic [95 % interval], n "
-             "| verdict | why |", "|---|---|---|---|---|"]
+def claim_groups(rows: list[LedgerRow]) -> list[list[LedgerRow]]:
+    """The rows of each claim (chapter, group), in ledger order."""
+    groups: dict[tuple[str, str], list[LedgerRow]] = {}
     for r in rows:
-        reading = f"; *reading: {_cell(r.reading)}*" if r.reading else ""
+        groups.setdefault((r.chapter, r.group), []).append(r)
+    return list(groups.values())
+
+
+def headline(rows: list[LedgerRow]) -> str:
+    """``"17 claims: 5 reproduced, 8 differs, …; attainable by other methods: 3"``.
+
+    Counts claims, each once, by its headline row (default reading, the paper's method); a
+    claim of our own method only (no headline row) counts as attainable or not, apart.
+    """
+    groups = claim_groups(rows)
+    heads = [r for g in groups for r in g if r.headline]
+    others = [g for g in groups if not any(r.headline for r in g)]
+    attainable = sum(any(r.verdict == "attainable" for r in g) for g in groups)
+    text = f"{len(heads)} claims of the paper's methods: {summary(heads) or 'none'}"
+    if attainable:
+        text += (f"; {attainable} shown attainable by a method that is not the paper's "
+                 "(counted apart, never as reproduced)")
+    if others:
+        text += f"; {len(others)} claims of our own methods"
+    return text
+
+
+def _readings_badges(group: list[LedgerRow], shown: LedgerRow) -> str:
+    """The verdicts of a claim's other rows, as small badges (``+ 2 readings: ✘ 1, ◇ 1``)."""
+    rest = [r for r in group if r is not shown]
+    if not rest:
+        return ""
+    counts = {v: sum(r.verdict == v for r in rest) for v in VERDICTS}
+    text = ", ".join(f"{VERDICT_ICONS[v]} {n}" for v, n in counts.items() if n)
+    return f"<br><small>+ {len(rest)} other reading{'s' * (len(rest) > 1)}: {text}</small>"
+
+
+def _row_detail(r: LedgerRow) -> str:
+    reading = f"*{r.reading}*" if r.reading else "*as stated*"
+    method = f" (method: {r.method})" if r.method else ""
+    line = (f"  - {reading}{method}, {r.kind}: paper {r.paper}; ours {r.ours} — "
+            f"{verdict_badge(r.verdict)} {r.reason}")
+    if r.revised:
+        line += (f" *Rule revised after its numbers were seen ({r.revised}); under the original "
+                 f"rule:* {verdict_badge(r.original_verdict)}")
+    return line.replace("\n", " ").replace("$", "\\$")
+
+
+def chapter_table(rows: list[LedgerRow]) -> str:
+    """The MyST ledger of one chapter's rows, the same text in the intro and in the chapter:
+    a table of one line per claim (its headline row: default reading, the paper's method; or its
+    first row), the other readings counted under its verdict, and below it a dropdown with every
+    row's reading, statistic, verdict and reason."""
+    lines = ["| paper claim (where) | kind | paper | ours: statistic [95 % interval], n "
+             "| verdict |", "|---|---|---|---|---|"]
+    groups = claim_groups(rows)
+    for group in groups:
+        r = next((x for x in group if x.headline), group[0])
+        reading = f"; *{_cell(r.reading)}*" if r.reading and len(group) > 1 else ""
         lines.append(f"| {_cell(r.claim)} ({_cell(reader_source(r.source))}{reading}) "
-                     f"| {_cell(r.paper)} | {_cell(r.ours)} | {verdict_badge(r.verdict)} "
-                     f"| {_cell(r.reason)} |")
+                     f"| {r.kind} | {_cell(r.paper)} | {_cell(r.ours)} "
+                     f"| {verdict_badge(r.verdict)}{_readings_badges(group, r)} |")
+    lines += ["", "````{dropdown} Every reading, its statistic, verdict and reason", ""]
+    for group in groups:
+        lines.append(f"- **{group[0].claim}**")
+        lines += [_row_detail(r) for r in group]
+    lines += ["````", ""]
     return "\n".join(lines) + "\n"
 
 
@@ -245,8 +331,8 @@ def chapter_claims(chapter: str, out_dir: str | Path) -> str:
     """A chapter's ledger rows judged on the run in ``out_dir``: a note when the parameters are
     not the defaults, the verdict counts, and the same :func:`chapter_table` as the intro."""
     rows, run = run_rows(chapter, out_dir)
-    return (non_default_note(chapter, run) + f"{len(rows)} claims: {summary(rows)}.\n\n"
-            + chapter_table(rows))
+    return (non_default_note(chapter, run) + f"{headline(rows)} ({len(rows)} rows with the "
+            "readings).\n\n" + chapter_table(rows))
 
 
 def chapter_rules(chapter: str) -> str:
@@ -296,11 +382,11 @@ def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
 def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None) -> str:
     """The intro's ledger: one table per chapter, each headed by a link to the chapter's claims."""
     titles = titles or {}
-    lines = [f"{len(rows)} claims and readings: {summary(rows)}.", ""]
+    lines = [f"{headline(rows)} ({len(rows)} rows with the readings).", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"
-        lines += [f"**{link}** — {summary(mine)}", "", chapter_table(mine)]
+        lines += [f"**{link}** — {headline(mine)}", "", chapter_table(mine)]
     return "\n".join(lines)
 
 
@@ -319,11 +405,13 @@ def write_ledger_csv(rows: list[LedgerRow], path: str | Path) -> Path:
         writer = csv.writer(handle)
         writer.writerow(CSV_COLUMNS)
         for r in rows:
-            writer.writerow([r.chapter, r.claim, r.reading or "as stated",
+            writer.writerow([r.chapter, r.claim, r.reading or "as stated", r.kind, r.method,
+                             str(r.headline).lower(),
                              "" if r.paper_value is None else r.paper_value,
                              *("" if v is None else repr(v) if isinstance(v, float) else v
                                for v in (r.ours_value, r.ours_low, r.ours_high, r.n_samples)),
-                             r.verdict, r.reason])
+                             "" if r.min_samples is None else r.min_samples,
+                             r.verdict, r.reason, r.revised, r.original_verdict])
     return path
 
 

@@ -27,6 +27,7 @@ CLAIMS_TOML = """
 [fast]
 claim = "converges in about 0.15 s"
 source = "toy paper, p. 1"
+kind = "population"
 rule = "reproduced if the median is within 0.05 s of 0.15 s"
 paper_value = 0.15
 unit = "s"
@@ -48,6 +49,7 @@ reason = "t = {t_med:.2f} s"
 [trend]
 claim = "error grows with speed"
 source = "toy paper, p. 2"
+kind = "population"
 rule = "reproduced if the rho interval lies above 0"
 primary = "rho"
 n_samples = "rho_n"
@@ -61,6 +63,7 @@ claim = "error grows with speed"
 group = "trend"
 reading = "as printed"
 source = "toy paper, p. 2"
+kind = "deterministic"
 rule = "same, on the printed equation"
 primary = "rho_printed"
 deterministic = true
@@ -72,6 +75,7 @@ when = [{test = "range", metrics = ["rho_printed"], above = 0}]
 [timing]
 claim = "56 % faster"
 source = "toy paper, p. 4"
+kind = "implementation"
 rule = "ratio below 0.6"
 paper_value = 56
 unit = "%"
@@ -85,6 +89,7 @@ when = [{test = "range", metrics = ["ratio"], below = 0.6}]
 [lost]
 claim = "agrees with line data"
 source = "toy paper, p. 5"
+kind = "single-run"
 [lost.otherwise]
 verdict = "not testable"
 reason = "the line data are not published"

@@ -31,7 +31,7 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     PARAMS,
     QGRBPF_READINGS,
 )
-from railpaper.stats import median_interval, proportion_interval
+from railpaper.stats import median_interval, prediction_interval, proportion_interval
 
 #: |z| at or below which a final estimate is "within 2 posterior std" (satisfactory).
 Z_SATISFACTORY = 2.0
@@ -122,7 +122,9 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
         ``mc_satisfactory_rate_<f>``, ``mc_accuracy_gain_<p>_<q>`` and ``mc_accuracy_gain_ab_<q>``
         (percentage points), ``mc_settling_advantage_<q>`` (steps), ``mc_threshold_effect_<q>``
         (posterior std), ``mc_large_error_rate_<q>[_nothreshold]``; each with ``_low``,
-        ``_high`` and ``_n``.  ``<f>`` runs over the filters (and ``posterior`` for settling
+        ``_high`` and ``_n``.  The settling steps and |final errors| of the filters and the
+        accuracy gains also carry the records' 95 % prediction interval (``_p025``, ``_p975``,
+        each with ``_low``/``_high``; :func:`railpaper.stats.prediction_interval`).  ``<f>`` runs over the filters (and ``posterior`` for settling
         steps and errors), ``<q>`` over the two readings of Eq. (10).
     """
     n = len(table)
@@ -135,6 +137,11 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
                 f"mc_abs_final_error_{par}_{name}"))
             m.update(median_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
                 f"mc_abs_short_error_{par}_{name}"))
+        for name in FILTERS:                  # where one run falls: the single-run rows
+            m.update(prediction_interval(table[f"settling_step_{par}_{name}"]).metrics(
+                f"mc_settling_step_{par}_{name}"))
+            m.update(prediction_interval(np.abs(table[f"final_error_{par}_{name}"])).metrics(
+                f"mc_abs_final_error_{par}_{name}"))
         for name in FILTERS:
             inside = int(np.sum(np.abs(table[f"final_z_{par}_{name}"]) <= Z_SATISFACTORY))
             m.update(proportion_interval(inside, n).metrics(f"mc_within_2std_rate_{par}_{name}"))
@@ -148,6 +155,7 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
                                truth[par]) for par in PARAMS]
         for par, gain in zip(PARAMS, gains):
             m.update(median_interval(gain).metrics(f"mc_accuracy_gain_{par}_{q}"))
+            m.update(prediction_interval(gain).metrics(f"mc_accuracy_gain_{par}_{q}"))
         m.update(median_interval(np.mean(gains, axis=0)).metrics(f"mc_accuracy_gain_ab_{q}"))
         m.update(median_interval(settling_advantage(table, q)).metrics(
             f"mc_settling_advantage_{q}"))
