@@ -1,6 +1,7 @@
 """Monte Carlo evidence statistics against independent references (scipy, brute force)."""
 
 import itertools
+import math
 
 import numpy as np
 import pytest
@@ -85,3 +86,41 @@ def test_paired_trend_rho_is_scipy_spearman_per_row():
     expected = [stats.spearmanr(range(4), v[0]).statistic,
                 stats.spearmanr(range(4), v[1]).statistic, 0.0]
     assert paired_trend(v).rho.value == pytest.approx(np.median(expected))
+
+
+@pytest.mark.parametrize("n, p", [(20, 0.025), (100, 0.025), (100, 0.975), (400, 0.025),
+                                  (400, 0.975), (1000, 0.5), (37, 0.3)])
+def test_quantile_ranks_cover_and_are_the_tightest(n, p):
+    """The order-statistic interval of a quantile against the brute-force binomial sum: its
+    coverage P(l <= B <= u - 1) is >= 95 % (unless a rank was clipped at the sample's end), and
+    moving either rank inward drops one tail's share below 2.5 %."""
+    from railpaper.stats import quantile_ranks
+    low, high = quantile_ranks(n, p)
+    pmf = [math.comb(n, k) * p ** k * (1 - p) ** (n - k) for k in range(n + 1)]
+    below = sum(pmf[:low - 1])                  # P(B <= l - 1): the quantile lies below x_(l)
+    above = sum(pmf[high:])                     # P(B >= u): it lies above x_(u)
+    assert low == 1 or below <= 0.025 + 1e-12
+    assert high == n or above <= 0.025 + 1e-12
+    assert sum(pmf[:low + 1]) > 0.025 - 1e-12   # l + 1 would leave more than 2.5 % below
+    assert high == n or sum(pmf[high - 1:]) > 0.025 - 1e-12
+
+
+def test_prediction_interval_holds_a_new_record_95_percent_of_the_time():
+    """Over many simulated sets of records, one more record falls inside [q_2.5, q_97.5] about
+    95 % of the time (distribution-free), and the quantiles' intervals hold the true quantiles
+    of the distribution at least as often as their level (away from clipped ends)."""
+    from scipy import stats as st
+    from railpaper.stats import prediction_interval
+    rng = np.random.default_rng(3)
+    n, trials = 400, 2000
+    inside = low_covered = high_covered = 0
+    q_low, q_high = st.norm.ppf(0.025), st.norm.ppf(0.975)
+    for _ in range(trials):
+        pi = prediction_interval(rng.standard_normal(n))
+        x = rng.standard_normal()
+        inside += pi.low <= x <= pi.high
+        low_covered += pi.low_low <= q_low <= pi.low_high
+        high_covered += pi.high_low <= q_high <= pi.high_high
+    assert abs(inside / trials - 0.95) < 0.015
+    assert low_covered / trials >= 0.94 and high_covered / trials >= 0.94
+    assert pi.metrics("x")["x_p025_low"] == pi.low_low and pi.n == n

@@ -21,7 +21,7 @@ from __future__ import annotations
 import csv
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -31,6 +31,7 @@ from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.claim_rules import (
     RULE_VERDICTS,
     check_row,
+    condition_thresholds,
     is_untestable,
     original_rule,
     rule_metrics,
@@ -78,6 +79,7 @@ class LedgerRow:
     headline: bool = False
     revised: str = ""
     original_verdict: str = ""
+    reference: object = None
 
 
 def claims_label(chapter: str) -> str:
@@ -182,9 +184,29 @@ def chapter_rows(chapter: str, claims: dict[str, dict], run: dict | None,
                               verdict, reason, row.get("reading", ""), row.get("group", key),
                               row.get("statistic", ""), row.get("paper_value"), value, low,
                               high, n, row["kind"], row.get("method", ""),
-                              row.get("min_samples"), False, revised, original_verdict))
+                              row.get("min_samples"), False, revised, original_verdict,
+                              rule_reference(row, values)))
     mark_headlines(rows)
     return rows
+
+
+def rule_reference(row: dict, values: dict):
+    """What the row's statistic is compared with: the paper's number, else the first threshold
+    a condition on the row's interval (or primary) reads; None when neither exists."""
+    if isinstance(row.get("paper_value"), (int, float)) and not isinstance(
+            row.get("paper_value"), bool):
+        return row["paper_value"]
+    names = set(row.get("interval", [])) | {row.get("primary")}
+    for case in row.get("cases", []):
+        for cond in case.get("when", []):
+            if names & set(cond.get("metrics", [])):
+                try:
+                    found = condition_thresholds(cond, row, values)
+                except (KeyError, TypeError, ValueError):
+                    found = []
+                if found:
+                    return found[0]
+    return None
 
 
 def mark_headlines(rows: list[LedgerRow]) -> None:
@@ -293,6 +315,24 @@ def _row_detail(r: LedgerRow) -> str:
     return line.replace("\n", " ").replace("$", "\\$")
 
 
+def fold_inert_readings(group: list[LedgerRow]) -> list[LedgerRow]:
+    """The rows of one claim with readings that change nothing folded together: rows with the
+    same verdict and the same reason (the evidence it quotes) become one row naming every
+    reading (``a = b``)."""
+    out: dict[tuple, LedgerRow] = {}
+    for r in group:
+        key = (r.verdict, r.reason, r.method, r.original_verdict)
+        if key in out:
+            first = out[key]
+            out[key] = replace(first, reading=f"{first.reading or 'as stated'} = "
+                               f"{r.reading or 'as stated'} (the readings change nothing here)"
+                               if "change nothing" not in first.reading else
+                               first.reading.replace(" (the readings", f" = {r.reading} (the readings"))
+        else:
+            out[key] = r
+    return list(out.values())
+
+
 def chapter_table(rows: list[LedgerRow]) -> str:
     """The MyST ledger of one chapter's rows, the same text in the intro and in the chapter:
     a table of one line per claim (its headline row: default reading, the paper's method; or its
@@ -310,7 +350,7 @@ def chapter_table(rows: list[LedgerRow]) -> str:
     lines += ["", "````{dropdown} Every reading, its statistic, verdict and reason", ""]
     for group in groups:
         lines.append(f"- **{group[0].claim}**")
-        lines += [_row_detail(r) for r in group]
+        lines += [_row_detail(r) for r in fold_inert_readings(group)]
     lines += ["````", ""]
     return "\n".join(lines) + "\n"
 
@@ -367,6 +407,12 @@ def chapter_rules(chapter: str) -> str:
             selects = (f" (selected by `{row['reading_parameter']}`)"
                        if row.get("reading_parameter") else "")
             ours = f" *Ours:* {row['statistic']}." if row.get("statistic") else ""
+            ours = f" *Kind:* {row['kind']}" + (f" (method: {row['method']})"
+                                                 if row.get("method") else "") + "." + ours
+            revision = row.get("revised_after_evidence")
+            if revision:
+                ours += (f" *Revised after its numbers were seen* ({revision['when']}): "
+                         f"{revision['what']}.")
             why = (f" *Why:* {once(row['justification'], group, where)}"
                    if row.get("justification") else "")
             lines.append(f"  - {head}{selects}: {once(what, group, where)}{ours}{why}"
@@ -382,7 +428,9 @@ def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
 def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None) -> str:
     """The intro's ledger: one table per chapter, each headed by a link to the chapter's claims."""
     titles = titles or {}
-    lines = [f"{headline(rows)} ({len(rows)} rows with the readings).", ""]
+    revised = sum(bool(r.revised) for r in rows)
+    lines = [f"{headline(rows)} ({len(rows)} rows with the readings). {revised} of the "
+             f"{len(rows)} rules were revised after their numbers were seen.", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"
@@ -417,11 +465,14 @@ def write_ledger_csv(rows: list[LedgerRow], path: str | Path) -> Path:
 
 def write_ledger(book_dir: str | Path, chapters: list[str],
                  titles: Callable[[str], str] | None = None) -> Path:
-    """Write ``_generated/claims_ledger.md`` and ``claims_ledger.csv`` from ``book_dir/chapters``."""
+    """Write ``_generated/claims_ledger.md``, ``claims_ledger.csv`` and the figure
+    ``claims_ledger.png`` from ``book_dir/chapters``."""
     rows = build_ledger(chapters, Path(book_dir) / "chapters")
     title = titles or (lambda c: chapter_spec(c).title)
     path = Path(book_dir) / "_generated" / "claims_ledger.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(ledger_markdown(rows, {c: title(c) for c in chapters}))
     write_ledger_csv(rows, path.with_suffix(".csv"))
+    from railpaper.pipeline.ledger_figure import plot_ledger    # matplotlib only when writing
+    plot_ledger(rows, {c: title(c) for c in chapters}, path.with_suffix(".png"))
     return path

@@ -90,3 +90,36 @@ def test_ledger_csv_written(built_book):
         table = list(csv.DictReader(handle))
     assert table and list(table[0]) == CSV_COLUMNS
     assert not any("{" in row["reason"] for row in table), "a reason template did not format"
+
+
+def test_no_decided_verdict_while_its_interval_straddles_a_threshold(built_book):
+    """The intro's vocabulary on every row of the quick book, checked from outside the rule
+    code: a row that says a decided verdict must get that same verdict wherever inside its
+    deciding interval the statistic lies (each interval collapsed to points across it)."""
+    import json
+
+    import numpy as np
+
+    from railpaper.pipeline.claim_rules import DECIDED_VERDICTS, deciding_intervals, rule_verdict
+    from railpaper.pipeline.ledger import build_ledger
+    from railpaper.pipeline.outputs import claims
+    book = built_book.parent.parent
+    problems, checked = [], 0
+    for row in build_ledger(book_chapters(), book / "chapters"):
+        if row.verdict not in DECIDED_VERDICTS:
+            continue
+        rule = claims(row.chapter)[row.key]
+        out = book / "chapters" / row.chapter
+        values = json.loads((out / "timings.json").read_text()).get("metrics", {}) \
+            if (out / "timings.json").exists() else {}
+        values.update(json.loads((out / "metrics.json").read_text())["metrics"])
+        for low, high in deciding_intervals(rule):
+            names = [low, high] + ([rule["primary"]] if [low, high] == rule.get("interval") else [])
+            seen = set()
+            for x in np.linspace(values[low], values[high], 201):
+                seen.add(rule_verdict(rule, dict(values, **dict.fromkeys(names, x)))[0])
+            checked += 1
+            if len(seen) > 1:
+                problems.append(f"{row.chapter} {row.key}: says {row.verdict} while its interval "
+                                f"[{values[low]:.4g}, {values[high]:.4g}] holds {sorted(seen)}")
+    assert checked > 30 and not problems, "\n".join(problems)

@@ -75,3 +75,48 @@ def test_three_valued_band_logic_on_hand_cases():
     assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (0.2, 0.9)}) == {"reproduced"}
     assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (1.2, 3)}) == {"reproduced", "differs"}
     assert verdicts_over_bands(ref, {"a": (0, 0.5), "b": (1.6, 3)}) == {"differs"}
+
+
+STRADDLE = {"rule": "r", "primary": "rho", "interval": ["rho_low", "rho_high"], "n_samples": "n",
+            "cases": [{"verdict": "reproduced", "reason": "rises",
+                       "when": [{"test": "range", "metrics": ["rho_low"], "above": 0}]}],
+            "otherwise": {"verdict": "differs", "reason": "does not rise"}}
+
+
+def test_an_interval_across_the_threshold_is_undecided_on_a_run_and_over_bands():
+    """The intro's definition, applied by the rule code: the rule alone would say 'differs'
+    for rho = 0.38 [-0.43, 0.92]; its interval holds the threshold 0, so the row is undecided."""
+    from railpaper.pipeline.ledger import judge
+    verdict, reason = judge(STRADDLE, {"rho": 0.38, "rho_low": -0.43, "rho_high": 0.92, "n": 20})
+    assert verdict == "undecided"
+    assert "[-0.43, 0.92], n = 20 straddles the rule's threshold 0" in reason
+    assert "would say differs" in reason
+    assert judge(STRADDLE, {"rho": 0.5, "rho_low": 0.1, "rho_high": 0.9, "n": 20})[0] == "reproduced"
+    assert judge(STRADDLE, {"rho": -0.5, "rho_low": -0.9, "rho_high": -0.1, "n": 20})[0] == "differs"
+    assert judge(STRADDLE, {"rho": -0.5, "rho_low": -0.9, "rho_high": 0.0, "n": 20})[0] == "differs"
+    bands = {"n": (20, 20), "rho": (0.3, 0.5)}
+    assert verdicts_over_bands(STRADDLE, dict(bands, rho_low=(-0.6, -0.2), rho_high=(0.8, 1))) \
+        == {"undecided"}
+    assert verdicts_over_bands(STRADDLE, dict(bands, rho_low=(-0.6, -0.2), rho_high=(-0.1, 1))) \
+        == {"differs", "undecided"}
+    assert verdicts_over_bands(STRADDLE, dict(bands, rho_low=(0.1, 0.2), rho_high=(0.8, 1))) \
+        == {"reproduced"}
+
+
+def test_single_run_rows_read_the_ends_of_their_prediction_interval():
+    """A paper's single run against our records: inside even the narrowest interval the
+    quantiles allow is a plausible draw; outside the widest, it differs; between, undecided."""
+    from railpaper.pipeline.ledger import judge
+    row = {"rule": "r", "primary": "med", "interval": ["q1", "q2"], "n_samples": "n",
+           "paper_value": 55, "deciding": [["q1_low", "q1_high"], ["q2_low", "q2_high"]],
+           "cases": [{"verdict": "reproduced", "reason": "plausible", "when": [
+               {"test": "range", "metrics": ["q1_high"], "max": 55},
+               {"test": "range", "metrics": ["q2_low"], "min": 55}]},
+               {"verdict": "differs", "reason": "below", "when": [
+                   {"test": "range", "metrics": ["q1_low"], "above": 55}]}],
+           "otherwise": {"verdict": "undecided", "reason": "cannot tell"}}
+    run = {"med": 100, "q1": 40, "q2": 170, "q1_low": 30, "q1_high": 50, "q2_low": 160,
+           "q2_high": 180, "n": 100}
+    assert judge(row, run)[0] == "reproduced"          # the median 100 alone would "differ"
+    assert judge(row, dict(run, q1_low=60, q1_high=70))[0] == "differs"
+    assert judge(row, dict(run, q1_low=50, q1_high=60))[0] == "undecided"

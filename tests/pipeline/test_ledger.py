@@ -163,23 +163,60 @@ def test_non_default_parameters_noted_and_judged(monkeypatch, tmp_path):
 
 
 def test_rows_need_a_documented_rule():
-    bare = {"bare": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "cases": [
+    nokind = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "deterministic": True,
+                    "cases": [{"verdict": "reproduced", "reason": ""}]}}
+    with pytest.raises(DataError, match="needs 'kind'"):
+        chapter_rows("toy", nokind, {"metrics": {"a": 1}})
+    bare = {"bare": {"claim": "x", "source": "p", "kind": "population", "rule": "r", "primary": "a", "cases": [
         {"verdict": "reproduced", "reason": "", "when": []}]}}
     with pytest.raises(DataError, match="needs 'n_samples'"):
         chapter_rows("toy", bare, {"metrics": {"a": 1}})
-    norule = {"x": {"claim": "x", "source": "p", "primary": "a", "deterministic": True,
+    norule = {"x": {"claim": "x", "source": "p", "kind": "deterministic", "primary": "a", "deterministic": True,
                     "cases": [{"verdict": "reproduced", "reason": ""}]}}
     with pytest.raises(DataError, match="needs 'rule'"):
         chapter_rows("toy", norule, {"metrics": {"a": 1}})
-    badverdict = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a",
+    badverdict = {"x": {"claim": "x", "source": "p", "kind": "deterministic", "rule": "r", "primary": "a",
                         "deterministic": True, "cases": [{"verdict": "reproduced*", "reason": ""}]}}
-    with pytest.raises(DataError, match="verdict in reproduced, artefact, differs, undecided, not"):
+    with pytest.raises(DataError, match="verdict in reproduced, attainable, artefact, differs, undecided, not"):
         chapter_rows("toy", badverdict, {"metrics": {"a": 1}})
-    badtest = {"x": {"claim": "x", "source": "p", "rule": "r", "primary": "a", "deterministic": True,
+    badtest = {"x": {"claim": "x", "source": "p", "kind": "deterministic", "rule": "r", "primary": "a", "deterministic": True,
                      "cases": [{"verdict": "reproduced", "reason": "",
                                 "when": [{"test": "close_to", "metrics": ["a"]}]}]}}
     with pytest.raises(DataError, match="unknown test 'close_to'"):
         chapter_rows("toy", badtest, {"metrics": {"a": 1}})
+
+
+def _row(**extra):
+    row = {"claim": "x", "source": "p", "kind": "deterministic", "rule": "r", "primary": "a",
+           "deterministic": True, "cases": [{"verdict": "reproduced", "reason": "",
+                                             "when": [{"test": "range", "metrics": ["a"],
+                                                       "above": 0}]}]}
+    row.update(extra)
+    return row
+
+
+def test_other_methods_say_attainable_and_revisions_state_the_original():
+    with pytest.raises(DataError, match="says 'attainable', never 'reproduced'"):
+        chapter_rows("toy", {"x": _row(method="exact posterior")}, {"metrics": {"a": 1}})
+    attain = _row(cases=[{"verdict": "attainable", "reason": "",
+                          "when": [{"test": "range", "metrics": ["a"], "above": 0}]}])
+    with pytest.raises(DataError, match="name it in 'method'"):
+        chapter_rows("toy", {"x": attain}, {"metrics": {"a": 1}})
+    row = chapter_rows("toy", {"x": dict(attain, method="exact posterior")},
+                       {"metrics": {"a": 1}})[0]
+    assert row.verdict == "attainable" and not row.headline      # counted apart
+    with pytest.raises(DataError, match="needs 'what', 'when', 'why'"):
+        chapter_rows("toy", {"x": _row(revised_after_evidence={"what": "w"})}, {"metrics": {"a": 1}})
+    with pytest.raises(DataError, match="states the original rule"):
+        chapter_rows("toy", {"x": _row(revised_after_evidence={
+            "what": "w", "when": "2026-12-03", "why": "y"})}, {"metrics": {"a": 1}})
+    revised = _row(revised_after_evidence={
+        "what": "threshold 0 instead of 2", "when": "2026-12-03", "why": "y",
+        "original": {"cases": [{"verdict": "reproduced", "reason": "",
+                                "when": [{"test": "range", "metrics": ["a"], "above": 2}]}]}})
+    row = chapter_rows("toy", {"x": revised}, {"metrics": {"a": 1}})[0]
+    assert (row.verdict, row.original_verdict) == ("reproduced", "differs")
+    assert row.revised.startswith("2026-12-03: threshold 0 instead of 2")
 
 
 def test_equals_reference_metric_and_non_strict_increasing():
@@ -199,19 +236,25 @@ def test_equals_reference_metric_and_non_strict_increasing():
 def test_markdown_counts_badges_and_chapter_table_shared(toy):
     rows = list(toy(dict(GOOD, rho_low=-0.1), timings={"ratio": 0.44}).values())
     text = ledger_markdown(rows, {"toy": "Toy chapter"})
-    assert text.startswith("5 claims and readings: 3 reproduced, 1 differs, 1 not testable.")
-    assert "**{ref}`Toy chapter <claims-toy>`** — 3 reproduced, 1 differs, 1 not testable" in text
+    # four claims (trend has two readings): the headline counts claims by their default reading
+    assert text.startswith("4 claims of the paper's methods: 2 reproduced, 1 differs, "
+                           "1 not testable (5 rows with the readings).")
+    assert ("**{ref}`Toy chapter <claims-toy>`** — 4 claims of the paper's methods: 2 reproduced, "
+            "1 differs, 1 not testable") in text
     assert chapter_table(rows) in text                 # the chapter renders the very same table
-    assert text.count('<span class="verdict verdict-reproduced">') == 3
+    assert text.count('<span class="verdict verdict-reproduced">') == 2 + 3   # table + dropdown
+    assert "+ 1 other reading: ✔ 1" in text            # trend_printed, folded under trend
     assert '<span class="verdict verdict-not-testable">∅ not testable</span>' in text
-    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 1, 0, 1, 0)))
+    assert ledger_counts(rows)["toy"] == dict(zip(VERDICTS, (3, 0, 0, 1, 0, 1, 0)))
 
 
 def test_markdown_escapes_table_breakers():
     row = LedgerRow("toy", "k", "a | b", "s", "$1", "2", "differs", "x | y")
-    line = chapter_table([row]).splitlines()[-1]
+    table = chapter_table([row]).splitlines()
+    line = table[2]
     assert len(re.findall(r"(?<!\\)\|", line)) == 6     # five columns, pipes inside escaped
-    assert "a \\| b" in line and "x \\| y" in line and "\\$1" in line
+    assert "a \\| b" in line and "\\$1" in line
+    assert any("x | y" in text for text in table[3:])   # the reason, in the dropdown below
 
 
 def test_ledger_csv_columns_and_numbers(toy, tmp_path):
@@ -226,6 +269,8 @@ def test_ledger_csv_columns_and_numbers(toy, tmp_path):
     assert float(fast["ours"]) == 0.12 and float(fast["ours_high"]) == 0.13
     assert int(fast["n_samples"]) == 20 and float(fast["paper_value"]) == 0.15
     assert table[4]["verdict"] == "not testable" and table[4]["ours"] == ""
+    assert [t["headline"] for t in table] == ["true", "true", "false", "true", "true"]
+    assert [t["kind"] for t in table][:3] == ["population", "population", "deterministic"]
 
 
 @pytest.mark.parametrize("chapter", book_chapters())
