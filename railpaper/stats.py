@@ -10,6 +10,9 @@ the same bytes in ``metrics.json``:
 * :func:`prediction_interval` — where a single run falls: the central 95 % of the records
   (their 2.5 % and 97.5 % quantiles), each quantile with its own order-statistic confidence
   interval, for claims a paper read off one run (is its number a plausible draw?);
+* :func:`paired_slope` — a trend with power: the mean over seeds of each seed's least-squares
+  slope of the value on the level, with Student's t interval (the per-seed slopes are
+  continuous, unlike a Spearman ρ over a few levels);
 * :func:`paired_trend` — a trend over ordered levels (speeds) measured on the same seeds: the
   per-seed Spearman correlation between level and value, its median with an order-statistic
   interval, and the two-sided sign-test p-value of "as many seeds rise as fall".
@@ -217,6 +220,28 @@ def paired_trend(values, level: float = LEVEL) -> Trend:
     m = rising + falling
     p = 1.0 if m == 0 else float(_st.binomtest(rising, m, 0.5).pvalue)
     return Trend(median_interval(rhos, level), rising, falling, p)
+
+
+def paired_slope(values, levels, level: float = LEVEL) -> Estimate:
+    """Mean over seeds of the per-seed least-squares slope of value on level, t interval.
+
+    Parameters
+    ----------
+    values : array_like, shape (n_seeds, n_levels)
+        ``values[i, j]``: the quantity on seed i at level j (paired: same seed at every level).
+    levels : array_like, shape (n_levels,)
+        The levels (e.g. speeds, km/h); the slope is in value units per level unit.
+    """
+    v = np.asarray(values, dtype=float)
+    x = np.asarray(levels, dtype=float)
+    if v.ndim != 2 or v.shape[1] < 2 or x.shape != (v.shape[1],) or np.ptp(x) == 0:
+        raise ValueError(f"paired_slope: need values (n_seeds, n_levels >= 2) and distinct "
+                         f"levels of that length, got {v.shape} and {x.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError("paired_slope: values must be finite")
+    dx = x - x.mean()
+    slopes = (v - v.mean(axis=1, keepdims=True)) @ dx / (dx @ dx)     # OLS slope per seed
+    return mean_interval(slopes, level)
 
 
 def rate(hits, level: float = LEVEL) -> Estimate:

@@ -124,3 +124,20 @@ def test_prediction_interval_holds_a_new_record_95_percent_of_the_time():
     assert abs(inside / trials - 0.95) < 0.015
     assert low_covered / trials >= 0.94 and high_covered / trials >= 0.94
     assert pi.metrics("x")["x_p025_low"] == pi.low_low and pi.n == n
+
+
+def test_paired_slope_is_the_mean_of_scipy_per_seed_regressions():
+    """Against scipy.stats.linregress per seed and scipy's t interval of their mean."""
+    from railpaper.stats import paired_slope
+    rng = np.random.default_rng(5)
+    speeds = np.array([40.0, 60.0, 100.0, 160.0, 200.0])
+    values = 0.1 + 2e-4 * speeds + rng.normal(0, 0.01, (30, speeds.size))
+    est = paired_slope(values, speeds)
+    slopes = [stats.linregress(speeds, row).slope for row in values]
+    low, high = stats.t.interval(0.95, len(slopes) - 1, loc=np.mean(slopes),
+                                 scale=stats.sem(slopes))
+    assert est.value == pytest.approx(np.mean(slopes), rel=1e-12)
+    assert (est.low, est.high) == (pytest.approx(low, rel=1e-10), pytest.approx(high, rel=1e-10))
+    assert est.n == 30 and est.low > 0                  # the rise of 2e-4 s per km/h is found
+    with pytest.raises(ValueError, match="distinct levels"):
+        paired_slope(values, np.ones(5))

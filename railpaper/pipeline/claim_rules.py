@@ -272,9 +272,21 @@ def straddle_reason(row: dict, values: dict, found: list[tuple[str, str, float]]
                     verdict: str) -> str:
     """The reason template of a row made undecided because its interval straddles a threshold."""
     low_name, high_name, t = found[0]
+    low, high = values[low_name], values[high_name]
     n = f", n = {{{row['n_samples']}}}" if "n_samples" in row else ""
-    return (f"cannot tell: the 95 % interval [{values[low_name]:.4g}, {values[high_name]:.4g}]"
-            f"{n} straddles the rule's threshold {t:.4g} (the rule alone would say {verdict})")
+    text = (f"cannot tell: the 95 % interval [{low:.4g}, {high:.4g}]{n} straddles the rule's "
+            f"threshold {t:.4g} (the rule alone would say {verdict})")
+    samples = values.get(row.get("n_samples"))
+    centre = values.get(row.get("primary"), (low + high) / 2)
+    if isinstance(samples, (int, float)) and isinstance(centre, (int, float)) and centre != t \
+            and low <= centre <= high:
+        # an interval narrows as 1/sqrt(n): the size at which it would clear t if the statistic
+        # stayed where it is (an estimate, said as such)
+        half = (high - low) / 2
+        needed = math.ceil(samples * (half / abs(centre - t)) ** 2)
+        text += (f"; about {needed} samples would decide it if the statistic stayed at "
+                 f"{centre:.4g} (the interval narrows as 1/√n)")
+    return text
 
 
 def rule_verdict(row: dict, values: dict) -> tuple[str, str, int | None]:

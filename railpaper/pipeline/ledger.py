@@ -37,6 +37,7 @@ from railpaper.pipeline.claim_rules import (
     rule_metrics,
     verdict_on_run,
 )
+from railpaper.pipeline.ledger_figure import plot_ledger
 from railpaper.pipeline.outputs import claims
 
 VERDICTS = RULE_VERDICTS + ("missing",)
@@ -473,6 +474,5 @@ def write_ledger(book_dir: str | Path, chapters: list[str],
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(ledger_markdown(rows, {c: title(c) for c in chapters}))
     write_ledger_csv(rows, path.with_suffix(".csv"))
-    from railpaper.pipeline.ledger_figure import plot_ledger    # matplotlib only when writing
     plot_ledger(rows, {c: title(c) for c in chapters}, path.with_suffix(".png"))
     return path
