@@ -334,3 +334,23 @@ def test_chapter_rules_gives_each_rule_and_reason_once_and_every_reading(chapter
     # every claim heads exactly one item
     for claim in {row["claim"] for row in rows}:
         assert text.count(f"**{claim}**") >= 1
+
+
+def test_ledger_figure_places_the_paper_value_on_our_interval(tmp_path):
+    """The common scale: our interval is [-1, 1]; the paper's value lands where it falls (by
+    hand: interval [1, 3], value 2 -> 0, value 5 -> 3), clipped beyond ±4; a deterministic row
+    is 0 when exact; the figure is written."""
+    from railpaper.pipeline.ledger_figure import CLIP, claim_position, plot_ledger
+
+    def row(reference, low=1.0, high=3.0, value=2.0, kind="population", paper=None):
+        r = LedgerRow("toy", "k", "c", "s", "p", "o", "differs", "why", kind=kind,
+                      ours_value=value, ours_low=low, ours_high=high, paper_value=paper)
+        r.reference, r.headline = reference, True
+        return r
+    assert claim_position(row(2.0)) == 0.0 and claim_position(row(5.0)) == 3.0
+    assert claim_position(row(0.0)) == -2.0 and claim_position(row(100.0)) == CLIP
+    assert claim_position(row(4, low=None, high=None, value=4, paper=4)) == 0.0
+    assert claim_position(row(4, low=None, high=None, value=6, paper=4)) == CLIP
+    assert claim_position(row(None)) is None
+    path = plot_ledger([row(2.0), row(9.0)], {"toy": "Toy"}, tmp_path / "ledger.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
