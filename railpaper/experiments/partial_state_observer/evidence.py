@@ -142,6 +142,9 @@ def evidence_metrics(mc: pd.DataFrame, reading: str) -> dict:
     for stem, estimator, column in TRENDS if len(speeds) > 1 else ():   # a trend needs 2 speeds
         values_ = by_seed_and_speed(mc, reading, estimator, column)
         out.update(stats.paired_trend(values_).metrics(f"{stem}_{reading}"))
+        # the same trend with power: mean per-seed least-squares slope (column unit per km/h)
+        out.update(stats.paired_slope(values_, speeds).metrics(
+            f"{stem.removesuffix('_rho')}_slope_per_kmh_{reading}"))
     for name, estimator in (("mc_biggest_mean_relative_error", "paper"),
                             ("mc_biggest_mean_relative_error_noisefree", "paper_noisefree")):
         top = by_seed_and_speed(mc, reading, estimator, "biggest_mean_relative_error")[:, -1]
