@@ -100,12 +100,18 @@ def quantile_ranks(n: int, p: float, level: float = LEVEL) -> tuple[int, int]:
     u > n) is clipped to the sample's minimum or maximum, whose coverage at that end is then
     below ``level`` (the interval says "no record went further", not more).
     """
+    low, high = _quantile_ranks(n, p, level)
+    return max(low, 1), min(high, n)
+
+
+def _quantile_ranks(n: int, p: float, level: float) -> tuple[int, int]:
+    """The unclipped ranks of :func:`quantile_ranks` (l < 1 or u > n: no such order statistic)."""
     alpha = (1 - level) / 2
     low = int(_st.binom.ppf(alpha, n, p))             # smallest k with cdf(k) >= alpha
     if _st.binom.cdf(low, n, p) > alpha:
         low -= 1                                      # cdf(low) <= alpha, or low = -1
     high = int(_st.binom.ppf(1 - alpha, n, p))        # smallest k with cdf(k) >= 1 - alpha
-    return max(low + 1, 1), min(high + 1, n)
+    return low + 1, high + 1
 
 
 @dataclass(frozen=True)
@@ -121,13 +127,19 @@ class PredictionInterval:
     high_high: float
     n: int
     coverage: float = 0.95
+    low_clipped: bool = False
+    high_clipped: bool = False
 
     def metrics(self, name: str) -> dict[str, float | int]:
-        """``{name_p025, name_p025_low, name_p025_high, name_p975, …_low, …_high}`` (the
-        quantile names are those of the default 95 % coverage)."""
+        """``{name_p025, name_p025_low, name_p025_high, name_p975, …_low, …_high}`` and
+        ``name_p025_clipped`` / ``name_p975_clipped`` (1 when that quantile's outer end is the
+        sample's extreme, whose confidence is below the level: a rule must not call a value
+        beyond it implausible).  The names are those of the default 95 % coverage."""
         return {f"{name}_p025": self.low, f"{name}_p025_low": self.low_low,
                 f"{name}_p025_high": self.low_high, f"{name}_p975": self.high,
-                f"{name}_p975_low": self.high_low, f"{name}_p975_high": self.high_high}
+                f"{name}_p975_low": self.high_low, f"{name}_p975_high": self.high_high,
+                f"{name}_p025_clipped": int(self.low_clipped),
+                f"{name}_p975_clipped": int(self.high_clipped)}
 
 
 def prediction_interval(samples, coverage: float = 0.95, level: float = LEVEL
@@ -141,12 +153,16 @@ def prediction_interval(samples, coverage: float = 0.95, level: float = LEVEL
     """
     x = np.sort(_finite(samples, "prediction_interval"))
     n = x.size
-    ends = []
-    for q in ((1 - coverage) / 2, (1 + coverage) / 2):
+    ends, clipped = [], []
+    # rounded: (1 - 0.95) / 2 is 0.025000000000000022 in floating point, which would move the
+    # inverted-cdf quantile one rank up whenever n * 0.025 is an integer
+    for q in (round((1 - coverage) / 2, 12), round((1 + coverage) / 2, 12)):
         point = float(np.quantile(x, q, method="inverted_cdf"))
-        lo_rank, hi_rank = quantile_ranks(n, q, level)
-        ends += [point, float(x[lo_rank - 1]), float(x[hi_rank - 1])]
-    return PredictionInterval(*ends, n=n, coverage=coverage)
+        lo_rank, hi_rank = _quantile_ranks(n, q, level)
+        ends += [point, float(x[max(lo_rank, 1) - 1]), float(x[min(hi_rank, n) - 1])]
+        clipped.append(lo_rank < 1 if q < 0.5 else hi_rank > n)
+    return PredictionInterval(*ends, n=n, coverage=coverage, low_clipped=clipped[0],
+                              high_clipped=clipped[1])
 
 
 def mean_interval(samples, level: float = LEVEL) -> Estimate:

@@ -71,7 +71,8 @@ RULE_VERDICTS = ("reproduced", "attainable", "artefact", "differs", "undecided",
 DECIDED_VERDICTS = ("reproduced", "attainable", "artefact", "differs")
 KINDS = ("single-run", "population", "deterministic", "design", "implementation")
 REVISION_KEYS = {"what", "when", "why", "original"}
-ORIGINAL_KEYS = {"cases", "otherwise", "min_samples"}
+ORIGINAL_KEYS = {"cases", "otherwise", "min_samples", "primary", "interval", "n_samples",
+                 "deciding"}
 #: Verdicts a row may state without any case (a fixed outcome, said why in its reason).
 FIXED_VERDICTS = ("undecided", "not testable")
 TESTS = ("within_abs", "within_factor", "range", "equals", "increasing")
@@ -107,6 +108,9 @@ def check_row(key: str, row: dict, where: str) -> None:
     if row.get("method") and "reproduced" in verdicts:
         fail("a row about a method that is not the paper's ('method') says 'attainable', "
              "never 'reproduced'")
+    if row["kind"] == "design" and set(verdicts) - {"attainable", "not testable", "undecided"}:
+        fail("a design row (a number our own choice sets) says 'attainable', 'not testable' or "
+             "'undecided', never a finding")
     if not row.get("method") and "attainable" in verdicts:
         fail("'attainable' is for a method that is not the paper's: name it in 'method'")
     revision = row.get("revised_after_evidence")
@@ -205,12 +209,20 @@ def too_few_samples(row: dict, n) -> str:
             "disjoint batches of seeds disagree on the verdict; this run's statistic is shown")
 
 
-def deciding_intervals(row: dict) -> list[tuple[str, str]]:
-    """The row's deciding intervals as (low metric, high metric): ``deciding``, else
-    ``interval``, else none (a deterministic row)."""
-    if "deciding" in row:
-        return [tuple(pair) for pair in row["deciding"]]
-    return [tuple(row["interval"])] if "interval" in row else []
+def deciding_intervals(row: dict, values: dict | None = None) -> list[tuple[str, str]]:
+    """The row's deciding intervals as (low metric, high metric): ``deciding`` (else
+    ``interval``), and every ``<x>_low``/``<x>_high`` pair a condition reads (a mechanism or
+    collapse test decides too); the pairs need both ends in ``values`` when it is given."""
+    pairs = [tuple(p) for p in row["deciding"]] if "deciding" in row else (
+        [tuple(row["interval"])] if "interval" in row else [])
+    for name in condition_metrics(row):
+        for end, other in (("_low", "_high"), ("_high", "_low")):
+            if name.endswith(end):
+                stem = name[:-len(end)]
+                pair = (stem + "_low", stem + "_high")
+                if pair not in pairs and (values is None or all(m in values for m in pair)):
+                    pairs.append(pair)
+    return pairs
 
 
 def _interval_metrics(row: dict, pair: tuple[str, str]) -> set[str]:
@@ -245,27 +257,54 @@ def _cases_up_to(row: dict, case_index: int | None) -> list[dict]:
     return cases if case_index is None else cases[:case_index + 1]
 
 
-def straddled_thresholds(row: dict, values: dict, case_index: int | None
-                         ) -> list[tuple[str, str, float]]:
-    """(low metric, high metric, threshold) for every threshold strictly inside a deciding
-    interval on this run.
+def _pair_thresholds(row: dict, pair: tuple[str, str], values: dict) -> list[float]:
+    names = _interval_metrics(row, pair)
+    out = []
+    for case in row.get("cases", []):
+        for cond in case.get("when", []):
+            if names & set(cond["metrics"]):
+                try:
+                    out += condition_thresholds(cond, row, values)
+                except (KeyError, TypeError, ValueError):
+                    pass
+    return sorted(set(out))
 
-    The thresholds are those of the conditions that read the interval (its ends or, for the
-    row's ``interval``, its primary) in the cases up to the one that decided (``case_index``;
-    None: no case held, so every case's).  Any of them inside the interval means a value of the
-    statistic inside its own interval would be judged otherwise: the intro calls that
-    *undecided*.
+
+def _collapsed_points(low: float, high: float, thresholds: list[float]) -> list[float]:
+    """The interval's ends and, for every threshold inside or at an end, the threshold and its
+    neighbouring floats: the points where a verdict can change."""
+    points = {low, high}
+    for t in thresholds:
+        if low <= t <= high:
+            points |= {t, math.nextafter(t, -math.inf), math.nextafter(t, math.inf)}
+    return sorted(x for x in points if low <= x <= high)
+
+
+def straddled_thresholds(row: dict, values: dict, case_index: int | None = None
+                         ) -> list[tuple[str, str, float]]:
+    """(low metric, high metric, point) for every deciding interval across which the rule's
+    verdict changes on this run.
+
+    Each deciding interval (:func:`deciding_intervals`) is collapsed in turn to points across
+    it (its ends, and either side of every threshold it holds), the other metrics kept; if the
+    rule gives more than one verdict over those points, a value of the statistic inside its own
+    interval would be judged otherwise: the intro calls that *undecided*.  ``case_index`` is
+    accepted for compatibility and unused.
     """
     out = []
-    for pair in deciding_intervals(row):
-        names = _interval_metrics(row, pair)
+    for pair in deciding_intervals(row, values):
         low, high = values[pair[0]], values[pair[1]]
-        for case in _cases_up_to(row, case_index):
-            for cond in case.get("when", []):
-                if names & set(cond["metrics"]):
-                    out += [(pair[0], pair[1], t) for t in condition_thresholds(cond, row, values)
-                            if low < t < high]
-    return list(dict.fromkeys(out))
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (low, high)):
+            continue
+        names = _interval_metrics(row, pair)
+        verdicts = {}
+        for x in _collapsed_points(low, high, _pair_thresholds(row, pair, values)):
+            verdicts.setdefault(rule_verdict(row, dict(values, **dict.fromkeys(names, x)))[0], x)
+        if len(verdicts) > 1:
+            # report the first threshold inside (the point where the verdict changes)
+            inside = [t for t in _pair_thresholds(row, pair, values) if low <= t <= high]
+            out.append((pair[0], pair[1], inside[0] if inside else high))
+    return out
 
 
 def straddle_reason(row: dict, values: dict, found: list[tuple[str, str, float]],
@@ -317,16 +356,20 @@ def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
 
 
 def original_rule(row: dict) -> dict | None:
-    """The row as it stood before ``revised_after_evidence`` (None if never revised):
-    the original's ``cases``, ``otherwise`` and ``min_samples`` (0 = none) replace the row's."""
+    """The row as it stood before ``revised_after_evidence`` (None if never revised): the
+    original's ``cases``, ``otherwise``, statistic (``primary``, ``interval``, ``n_samples``,
+    ``deciding``) and ``min_samples`` (0 = none) replace the row's."""
     revision = row.get("revised_after_evidence")
     if not revision:
         return None
     before = {k: v for k, v in row.items() if k != "revised_after_evidence"}
     original = revision.get("original", {})
-    for key in ("cases", "otherwise"):
+    for key in ("cases", "otherwise", "primary", "interval", "n_samples"):
         if key in original:
             before[key] = original[key]
+    before.pop("deciding", None)                   # the original read its own interval
+    if "deciding" in original:
+        before["deciding"] = original["deciding"]
     if "min_samples" in original:
         before.pop("min_samples", None)
         if original["min_samples"]:
@@ -391,33 +434,32 @@ def holds_over_bands(cond: dict, row: dict, bands: dict[str, tuple[float, float]
 
 
 def _straddle_over_bands(row: dict, bands: dict[str, tuple[float, float]],
-                         case_index: int | None) -> bool | None:
-    """Whether a deciding interval straddles a threshold of the cases up to ``case_index`` for
-    every (True), no (False) or some (None) point of the bands."""
+                         case_index: int | None = None) -> bool | None:
+    """Whether a deciding interval holds a threshold across which the verdict changes for every
+    (True), no (False) or some (None) point of the bands (the run-level test is
+    :func:`straddled_thresholds`)."""
     states = []
-    for pair in deciding_intervals(row):
+    mid = {m: (lo + hi) / 2 for m, (lo, hi) in bands.items()}
+    for pair in deciding_intervals(row, bands):
         names = _interval_metrics(row, pair)
+        if not names <= set(bands):
+            continue
         (low_min, low_max), (high_min, high_max) = bands[pair[0]], bands[pair[1]]
-        for case in _cases_up_to(row, case_index):
-            for cond in case.get("when", []):
-                if not names & set(cond["metrics"]):
-                    continue
-                if "reference" in cond:          # thresholds move with the reference's band
-                    r_low, r_high = bands[cond["reference"]]
-                    spans = [tuple(sorted(ts)) for ts in zip(
-                        condition_thresholds(cond, row, {cond["reference"]: r_low}),
-                        condition_thresholds(cond, row, {cond["reference"]: r_high}))]
-                else:
-                    spans = [(t, t) for t in condition_thresholds(cond, row, {})]
-                for t_low, t_high in spans:
-                    states.append(True if low_max < t_low and t_high < high_min else
-                                  None if low_min < t_high and t_low < high_max else False)
+        for t in _pair_thresholds(row, pair, mid):
+            sides = [verdicts_over_bands(row, dict(bands, **dict.fromkeys(names, (x, x))),
+                                         straddle=False)
+                     for x in (math.nextafter(t, -math.inf), t, math.nextafter(t, math.inf))]
+            if len(set().union(*sides)) == 1:
+                continue                          # the same verdict on both sides of t
+            states.append(True if low_max < t < high_min else
+                          None if low_min <= t <= high_max else False)
     if any(state is True for state in states):
         return True
     return None if any(state is None for state in states) else False
 
 
-def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set[str]:
+def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]],
+                        straddle: bool = True) -> set[str]:
     """Every verdict a run whose condition metrics lie anywhere in ``bands`` can get.
 
     One element: the bands decide the verdict, so a change that flips it fails the check.
@@ -433,11 +475,11 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set
             possible.add("undecided")
 
     def add(verdict: str, case_index: int | None) -> None:
-        straddle = (_straddle_over_bands(row, bands, case_index)
-                    if verdict in DECIDED_VERDICTS else False)
-        if straddle is not True:
+        state = (_straddle_over_bands(row, bands, case_index)
+                 if straddle and verdict in DECIDED_VERDICTS else False)
+        if state is not True:
             possible.add(verdict)
-        if straddle is not False:
+        if state is not False:
             possible.add("undecided")
 
     for index, case in enumerate(row.get("cases", [])):

@@ -211,10 +211,12 @@ def rule_reference(row: dict, values: dict):
 
 
 def mark_headlines(rows: list[LedgerRow]) -> None:
-    """Set ``headline`` on the first row of each claim (group) whose method is the paper's."""
+    """Set ``headline`` on the first row of each claim (group) whose method is the paper's (or
+    that judges the paper's claim on a design of ours: kind ``design``)."""
     seen = set()
     for r in rows:
-        if not r.method and (r.chapter, r.group) not in seen:
+        # a design row is the paper's own claim, judged on a design of ours: it heads its claim
+        if (not r.method or r.kind == "design") and (r.chapter, r.group) not in seen:
             seen.add((r.chapter, r.group))
             r.headline = True
 
@@ -279,14 +281,20 @@ def claim_groups(rows: list[LedgerRow]) -> list[list[LedgerRow]]:
 def headline(rows: list[LedgerRow]) -> str:
     """``"17 claims: 5 reproduced, 8 differs, …; attainable by other methods: 3"``.
 
-    Counts claims, each once, by its headline row (default reading, the paper's method); a
-    claim of our own method only (no headline row) counts as attainable or not, apart.
+    Counts claims, each once, by its headline row (default reading, the paper's method; a claim
+    our design attains counts as not testable for the paper); claims shown attainable by another
+    method (its first row, i.e. its default reading) and claims of our own methods are counted
+    apart.
     """
     groups = claim_groups(rows)
     heads = [r for g in groups for r in g if r.headline]
     others = [g for g in groups if not any(r.headline for r in g)]
-    attainable = sum(any(r.verdict == "attainable" for r in g) for g in groups)
-    text = f"{len(heads)} claims of the paper's methods: {summary(heads) or 'none'}"
+    # a claim our design attains is not testable for the paper's method (listed apart below)
+    counted = [replace(r, verdict="not testable") if r.verdict == "attainable" else r
+               for r in heads]
+    # attainable by another method: that method's first row (its default reading) says so
+    attainable = sum(next((r.verdict for r in g if r.method), "") == "attainable" for g in groups)
+    text = f"{len(heads)} claims of the paper's methods: {summary(counted) or 'none'}"
     if attainable:
         text += (f"; {attainable} shown attainable by a method that is not the paper's "
                  "(counted apart, never as reproduced)")

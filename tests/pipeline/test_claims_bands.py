@@ -120,3 +120,24 @@ def test_single_run_rows_read_the_ends_of_their_prediction_interval():
     assert judge(row, run)[0] == "reproduced"          # the median 100 alone would "differ"
     assert judge(row, dict(run, q1_low=60, q1_high=70))[0] == "differs"
     assert judge(row, dict(run, q1_low=50, q1_high=60))[0] == "undecided"
+
+
+def test_straddle_is_judged_by_the_verdict_not_by_any_threshold_inside():
+    """The referee's cases: a threshold of a case that cannot hold either side does not make a
+    row undecided; an interval touching the threshold does; so does a mechanism metric's
+    interval across its own threshold."""
+    from railpaper.pipeline.ledger import judge
+    row = {"rule": "r", "primary": "q", "interval": ["q_low", "q_high"], "n_samples": "n",
+           "cases": [
+               {"verdict": "reproduced", "reason": "r",
+                "when": [{"test": "range", "metrics": ["q_low"], "above": 0},
+                         {"test": "range", "metrics": ["size_low"], "above": 1.1}]},
+               {"verdict": "artefact", "reason": "a",
+                "when": [{"test": "range", "metrics": ["p_low"], "above": 0}]}],
+           "otherwise": {"verdict": "differs", "reason": "d"}}
+    run = {"q": 0.2, "q_low": -0.1, "q_high": 0.5, "size_low": 1.0, "size_high": 1.01,
+           "p_low": 0.3, "p_high": 0.9, "n": 20}
+    assert judge(row, run)[0] == "artefact"       # artefact on both sides of q = 0
+    assert judge(row, dict(run, p_low=0.0))[0] == "undecided"    # touches 0: artefact or not
+    assert judge(row, dict(run, p_low=-0.2))[0] == "undecided"   # straddles 0
+    assert judge(row, dict(run, p_low=-0.5, p_high=-0.2))[0] == "differs"

@@ -124,7 +124,10 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
         (posterior std), ``mc_large_error_rate_<q>[_nothreshold]``; each with ``_low``,
         ``_high`` and ``_n``.  The settling steps and |final errors| of the filters and the
         accuracy gains also carry the records' 95 % prediction interval (``_p025``, ``_p975``,
-        each with ``_low``/``_high``; :func:`railpaper.stats.prediction_interval`).  ``<f>`` runs over the filters (and ``posterior`` for settling
+        each with ``_low``/``_high`` and ``_clipped``; :func:`railpaper.stats.prediction_interval`),
+        at our last step and at step ``short_horizon`` (``mc_short_settling_step_…``,
+        ``mc_abs_short_error_…``, ``mc_short_accuracy_gain_…``): the two ends of the chapter's
+        bracket for the lost figure horizon.  ``<f>`` runs over the filters (and ``posterior`` for settling
         steps and errors), ``<q>`` over the two readings of Eq. (10).
     """
     n = len(table)
@@ -137,11 +140,14 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
                 f"mc_abs_final_error_{par}_{name}"))
             m.update(median_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
                 f"mc_abs_short_error_{par}_{name}"))
-        for name in FILTERS:                  # where one run falls: the single-run rows
-            m.update(prediction_interval(table[f"settling_step_{par}_{name}"]).metrics(
-                f"mc_settling_step_{par}_{name}"))
+        for name in FILTERS:                  # where one run falls: the single-run rows, at
+            for end in ("", "short_"):        # both ends of the horizon bracket
+                m.update(prediction_interval(table[f"{end}settling_step_{par}_{name}"]).metrics(
+                    f"mc_{end}settling_step_{par}_{name}"))
             m.update(prediction_interval(np.abs(table[f"final_error_{par}_{name}"])).metrics(
                 f"mc_abs_final_error_{par}_{name}"))
+            m.update(prediction_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
+                f"mc_abs_short_error_{par}_{name}"))
         for name in FILTERS:
             inside = int(np.sum(np.abs(table[f"final_z_{par}_{name}"]) <= Z_SATISFACTORY))
             m.update(proportion_interval(inside, n).metrics(f"mc_within_2std_rate_{par}_{name}"))
@@ -156,6 +162,9 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
         for par, gain in zip(PARAMS, gains):
             m.update(median_interval(gain).metrics(f"mc_accuracy_gain_{par}_{q}"))
             m.update(prediction_interval(gain).metrics(f"mc_accuracy_gain_{par}_{q}"))
+            short_gain = accuracy_gain(table[f"short_error_{par}_rbpf"],
+                                       table[f"short_error_{par}_{q}"], truth[par])
+            m.update(prediction_interval(short_gain).metrics(f"mc_short_accuracy_gain_{par}_{q}"))
         m.update(median_interval(np.mean(gains, axis=0)).metrics(f"mc_accuracy_gain_ab_{q}"))
         m.update(median_interval(settling_advantage(table, q)).metrics(
             f"mc_settling_advantage_{q}"))

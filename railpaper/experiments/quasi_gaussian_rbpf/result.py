@@ -150,20 +150,21 @@ class ReadingsStudy:
         """``reading_<key>_settling_step_<p>_h<H>`` (+ ``_low``, ``_high``, ``_n``),
         ``reading_<key>_interval_gap_<p>_<rbpf|qgrbpf>`` (steps from the paper's step ± 5 to the
         nearest interval; 0 = possible at some horizon),
-        ``reading_<key>_abs_error_<p>_step{4,<rbpf step>}`` and, at the longest horizon (the
-        record), the records' 95 % prediction interval of the settling step
+        ``reading_<key>_abs_error_<p>_step{4,<rbpf step>}`` and, at the shortest and the longest
+        horizon (the chapter's bracket), the records' 95 % prediction interval of the settling step
         (``reading_<key>_settling_step_<p>_h<H>_p025`` … ``_p975_high``)."""
         m = {}
         for row in self.table.itertuples():
             name = f"reading_{row.reading}_settling_step_{row.parameter}_h{row.horizon_steps}"
             m.update({name: row.settling_step, f"{name}_low": row.settling_step_low,
                       f"{name}_high": row.settling_step_high, f"{name}_n": row.n_records})
-        last = len(self.horizons_steps) - 1          # the chapter's one horizon: its record
-        for i, reading in enumerate(self.readings):
-            for j, par in enumerate(PARAMS):
-                name = (f"reading_{reading.key}_settling_step_{par}"
-                        f"_h{self.horizons_steps[last]}")
-                m.update(prediction_interval(self.settling_steps[i, last, j]).metrics(name))
+        # the chapter's horizon bracket: the shortest figure and the record (first, last)
+        for h in (0, len(self.horizons_steps) - 1):
+            for i, reading in enumerate(self.readings):
+                for j, par in enumerate(PARAMS):
+                    name = (f"reading_{reading.key}_settling_step_{par}"
+                            f"_h{self.horizons_steps[h]}")
+                    m.update(prediction_interval(self.settling_steps[i, h, j]).metrics(name))
         for reading in self.readings:
             for (par, filt), step in PAPER_STEPS.items():
                 m[f"reading_{reading.key}_interval_gap_{par}_{filt}"] = self.interval_gap(
