@@ -81,10 +81,15 @@ def operations_per_step(name: str, n_particles: int, n: int, p: int, d: int, m: 
 
 
 def operation_metrics(n_particles: int, n: int, p: int, d: int, m: int = 0) -> dict:
-    """``operations_per_step_<f>`` of every :data:`PAIRED` filter at ``n_particles`` and
-    ``operation_ratio_<q>_over_rbpf`` of each Q-GRBPF reading (deterministic: metrics.json)."""
-    totals = {f: sum(operations_per_step(f, n_particles, n, p, d, m).values()) for f in PAIRED}
+    """``operations_per_step_<f>`` of every :data:`PAIRED` filter at ``n_particles``,
+    ``operation_ratio_<q>_over_rbpf`` of each Q-GRBPF reading and
+    ``operation_share_resampling_of_rbpf_step`` (the systematic resampling's share of an RBPF
+    step's operations) (deterministic: metrics.json)."""
+    parts = {f: operations_per_step(f, n_particles, n, p, d, m) for f in PAIRED}
+    totals = {f: sum(parts[f].values()) for f in PAIRED}
     out = {f"operations_per_step_{f}": totals[f] for f in PAIRED}
+    out["operation_share_resampling_of_rbpf_step"] = (
+        parts["rbpf"]["resampling (systematic)"] / totals["rbpf"])
     for q in PAIRED[1:]:
         out[f"operation_ratio_{q}_over_rbpf"] = totals[q] / totals["rbpf"]
     return out
