@@ -113,7 +113,7 @@ def test_no_decided_verdict_while_its_interval_straddles_a_threshold(built_book)
         values = json.loads((out / "timings.json").read_text()).get("metrics", {}) \
             if (out / "timings.json").exists() else {}
         values.update(json.loads((out / "metrics.json").read_text())["metrics"])
-        for low, high in deciding_intervals(rule):
+        for low, high in deciding_intervals(rule, values):
             names = [low, high] + ([rule["primary"]] if [low, high] == rule.get("interval") else [])
             seen = set()
             for x in np.linspace(values[low], values[high], 201):
