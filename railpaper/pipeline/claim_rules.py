@@ -216,7 +216,7 @@ def deciding_intervals(row: dict, values: dict | None = None) -> list[tuple[str,
     pairs = [tuple(p) for p in row["deciding"]] if "deciding" in row else (
         [tuple(row["interval"])] if "interval" in row else [])
     for name in condition_metrics(row):
-        for end, other in (("_low", "_high"), ("_high", "_low")):
+        for end in ("_low", "_high"):
             if name.endswith(end):
                 stem = name[:-len(end)]
                 pair = (stem + "_low", stem + "_high")
@@ -252,11 +252,6 @@ def condition_thresholds(cond: dict, row: dict, values: dict) -> list[float]:
     return [ref / cond["factor"], ref * cond["factor"]]
 
 
-def _cases_up_to(row: dict, case_index: int | None) -> list[dict]:
-    cases = row.get("cases", [])
-    return cases if case_index is None else cases[:case_index + 1]
-
-
 def _pair_thresholds(row: dict, pair: tuple[str, str], values: dict) -> list[float]:
     names = _interval_metrics(row, pair)
     out = []
@@ -280,16 +275,14 @@ def _collapsed_points(low: float, high: float, thresholds: list[float]) -> list[
     return sorted(x for x in points if low <= x <= high)
 
 
-def straddled_thresholds(row: dict, values: dict, case_index: int | None = None
-                         ) -> list[tuple[str, str, float]]:
+def straddled_thresholds(row: dict, values: dict) -> list[tuple[str, str, float]]:
     """(low metric, high metric, point) for every deciding interval across which the rule's
     verdict changes on this run.
 
     Each deciding interval (:func:`deciding_intervals`) is collapsed in turn to points across
     it (its ends, and either side of every threshold it holds), the other metrics kept; if the
     rule gives more than one verdict over those points, a value of the statistic inside its own
-    interval would be judged otherwise: the intro calls that *undecided*.  ``case_index`` is
-    accepted for compatibility and unused.
+    interval would be judged otherwise: the intro calls that *undecided*.
     """
     out = []
     for pair in deciding_intervals(row, values):
@@ -347,9 +340,9 @@ def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
     """
     if "min_samples" in row and values[row["n_samples"]] < row["min_samples"]:
         return "undecided", too_few_samples(row, values[row["n_samples"]])
-    verdict, reason, index = rule_verdict(row, values)
+    verdict, reason, _ = rule_verdict(row, values)
     if verdict in DECIDED_VERDICTS:
-        found = straddled_thresholds(row, values, index)
+        found = straddled_thresholds(row, values)
         if found:
             return "undecided", straddle_reason(row, values, found, verdict)
     return verdict, reason
@@ -433,8 +426,7 @@ def holds_over_bands(cond: dict, row: dict, bands: dict[str, tuple[float, float]
     return _tri_all(out)
 
 
-def _straddle_over_bands(row: dict, bands: dict[str, tuple[float, float]],
-                         case_index: int | None = None) -> bool | None:
+def _straddle_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> bool | None:
     """Whether a deciding interval holds a threshold across which the verdict changes for every
     (True), no (False) or some (None) point of the bands (the run-level test is
     :func:`straddled_thresholds`)."""
@@ -474,20 +466,20 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]],
         if n_low < row["min_samples"]:
             possible.add("undecided")
 
-    def add(verdict: str, case_index: int | None) -> None:
-        state = (_straddle_over_bands(row, bands, case_index)
+    def add(verdict: str) -> None:
+        state = (_straddle_over_bands(row, bands)
                  if straddle and verdict in DECIDED_VERDICTS else False)
         if state is not True:
             possible.add(verdict)
         if state is not False:
             possible.add("undecided")
 
-    for index, case in enumerate(row.get("cases", [])):
+    for case in row.get("cases", []):
         state = _tri_all(holds_over_bands(c, row, bands) for c in case.get("when", []))
         if state is False:
             continue
-        add(case["verdict"], index)
+        add(case["verdict"])
         if state is True:
             return possible
-    add(row.get("otherwise", {}).get("verdict", "differs"), None)
+    add(row.get("otherwise", {}).get("verdict", "differs"))
     return possible
