@@ -38,6 +38,7 @@ def _table(n=25, seed=3):
             cols[f"settling_step_{par}_{name}"] = rng.integers(1, 300, n)
             cols[f"final_error_{par}_{name}"] = rng.normal(0, 0.1, n)
             cols[f"short_error_{par}_{name}"] = rng.normal(0, 0.2, n)
+            cols[f"short_settling_step_{par}_{name}"] = rng.integers(1, 60, n)
         for name in ev.FILTERS + tuple(q + ev.NO_THRESHOLD for q in ev.QGRBPF_READINGS):
             cols[f"final_z_{par}_{name}"] = rng.normal(0, 1.5, n)
         for name in ev.FILTERS:
@@ -98,6 +99,14 @@ def test_evidence_metrics_equal_independent_computation():
     assert m["mc_accuracy_gain_ab_qgrbpf_high"] == pytest.approx(high, abs=1e-12)
     ratio = t["final_std_ratio_a_qgrbpf"]
     assert m["mc_final_std_ratio_a_qgrbpf_high"] == _median_ci_by_counting(ratio)[1]
+    # where one record falls: the 2.5 % and 97.5 % record of 25 (ranks 1 and 25 by the
+    # inverted cdf), each quantile's interval clipped at the sample's ends at this n
+    short = np.sort(t["short_settling_step_b_rbpf"].to_numpy())
+    assert m["mc_short_settling_step_b_rbpf_p025"] == short[0]
+    assert m["mc_short_settling_step_b_rbpf_p975"] == short[-1]
+    assert m["mc_short_settling_step_b_rbpf_p025_clipped"] == 1
+    gains = np.sort(gain_a)
+    assert m["mc_accuracy_gain_a_qgrbpf_p975_high"] == pytest.approx(gains[-1], abs=1e-12)
     # every statistic comes with its interval and n
     for name in [k for k in m if k.endswith("_n")]:
         base = name[:-2]
