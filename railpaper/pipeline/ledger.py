@@ -296,8 +296,8 @@ def headline(rows: list[LedgerRow]) -> str:
     attainable = sum(next((r.verdict for r in g if r.method), "") == "attainable" for g in groups)
     text = f"{len(heads)} claims of the paper's methods: {summary(counted) or 'none'}"
     if attainable:
-        text += (f"; {attainable} shown attainable by a method that is not the paper's "
-                 "(counted apart, never as reproduced)")
+        text += (f"; {attainable} shown attainable by a method or a design that is not the "
+                 "paper's (counted apart, never as reproduced)")
     if others:
         text += f"; {len(others)} claims of our own methods"
     return text

@@ -127,8 +127,8 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
         each with ``_low``/``_high`` and ``_clipped``; :func:`railpaper.stats.prediction_interval`),
         at our last step and at step ``short_horizon`` (``mc_short_settling_step_…``,
         ``mc_abs_short_error_…``, ``mc_short_accuracy_gain_…``): the two ends of the chapter's
-        bracket for the lost figure horizon.  ``<f>`` runs over the filters (and ``posterior`` for settling
-        steps and errors), ``<q>`` over the two readings of Eq. (10).
+        bracket for the lost figure horizon.  ``<f>`` runs over the filters (and ``posterior``
+        for settling steps and errors), ``<q>`` over the two readings of Eq. (10).
     """
     n = len(table)
     m = {}
