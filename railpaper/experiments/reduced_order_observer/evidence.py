@@ -159,7 +159,7 @@ def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
     * ``mc_trend_<q>_rho_<r>``: median over seeds of the per-seed Spearman ρ(speed, q) over every
       speed of the run (paired: the same seed's track and noise at each speed), with ``_low``,
       ``_high``, ``_n``, ``_sign_p``, ``_rising_fraction``;
-    * ``mc_slope_convergence_time_s_per_kmh_<r>``: mean over seeds of the per-seed least-squares
+    * ``mc_trend_convergence_time_slope_per_kmh_<r>``: mean over seeds of the per-seed least-squares
       slope of the convergence time on speed (s per km/h), with its t interval;
     * ``mc_ratio_<q>_<r>`` for the force quantities: median over seeds of the value at the top
       speed over the value at the bottom speed (the size of a trend), with its interval;
@@ -187,7 +187,7 @@ def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
             metrics.update(stats.paired_trend(values).metrics(f"mc_trend_{name}_rho_{reading}"))
             if column == "convergence_time_s":              # the trend with power (s per km/h)
                 metrics.update(stats.paired_slope(values, speeds).metrics(
-                    f"mc_slope_convergence_time_s_per_kmh_{reading}"))
+                    f"mc_trend_convergence_time_slope_per_kmh_{reading}"))
             if column.startswith("force"):                  # effect size of the force trends
                 metrics.update(stats.median_interval(values[:, -1] / values[:, 0]).metrics(
                     f"mc_ratio_{name}_{reading}"))
