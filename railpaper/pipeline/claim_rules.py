@@ -26,6 +26,7 @@ One table of a claims file is one ledger row: one claim of a paper under one rea
     [convergence_slower_with_speed.revised_after_evidence]   # a rule changed after its numbers
     what = "..."; when = "2026-12-01"; why = "..."           # were seen, and the original rule:
     original = {min_samples = 0, cases = [...], otherwise = {...}}   # missing keys: as revised
+                              # (but ``deciding``: the original reads its own interval)
     [[convergence_slower_with_speed.cases]]    # tried in order; the first whose conditions hold
     verdict = "reproduced"    # reproduced | artefact | differs | undecided | not testable
     reason = "... {metric:.3g} ..."            # str.format over the run's metrics
@@ -59,6 +60,7 @@ above < m < below), ``equals`` (m == ref), ``increasing`` (the metrics in order 
 from __future__ import annotations
 
 import math
+from numbers import Real
 
 from railpaper.data import DataError
 
@@ -287,17 +289,25 @@ def straddled_thresholds(row: dict, values: dict) -> list[tuple[str, str, float]
     out = []
     for pair in deciding_intervals(row, values):
         low, high = values[pair[0]], values[pair[1]]
-        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (low, high)):
+        if not all(_finite_number(v) for v in (low, high)):
             continue
         names = _interval_metrics(row, pair)
-        verdicts = {}
-        for x in _collapsed_points(low, high, _pair_thresholds(row, pair, values)):
-            verdicts.setdefault(rule_verdict(row, dict(values, **dict.fromkeys(names, x)))[0], x)
-        if len(verdicts) > 1:
-            # report the first threshold inside (the point where the verdict changes)
-            inside = [t for t in _pair_thresholds(row, pair, values) if low <= t <= high]
-            out.append((pair[0], pair[1], inside[0] if inside else high))
+        thresholds = _pair_thresholds(row, pair, values)
+        first = None
+        for x in _collapsed_points(low, high, thresholds):
+            verdict = rule_verdict(row, dict(values, **dict.fromkeys(names, x)))[0]
+            if first is None:
+                first = verdict
+            elif verdict != first:
+                # the threshold where the verdict changes: the nearest one to this point
+                near = min(thresholds, key=lambda t: abs(t - x)) if thresholds else x
+                out.append((pair[0], pair[1], near))
+                break
     return out
+
+
+def _finite_number(value) -> bool:
+    return isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def straddle_reason(row: dict, values: dict, found: list[tuple[str, str, float]],
@@ -309,8 +319,12 @@ def straddle_reason(row: dict, values: dict, found: list[tuple[str, str, float]]
     text = (f"cannot tell: the 95 % interval [{low:.4g}, {high:.4g}]{n} straddles the rule's "
             f"threshold {t:.4g} (the rule alone would say {verdict})")
     samples = values.get(row.get("n_samples"))
-    centre = values.get(row.get("primary"), (low + high) / 2)
-    if isinstance(samples, (int, float)) and isinstance(centre, (int, float)) and centre != t \
+    centre = values.get(row.get("primary"))
+    # the estimate holds for a confidence interval of the row's own statistic; a prediction
+    # interval's ends do not narrow with n, and another pair's centre is not the primary
+    own = tuple(row.get("interval", ())) == (low_name, high_name) and row.get("kind") != \
+        "single-run"
+    if own and _finite_number(samples) and _finite_number(centre) and centre != t \
             and low <= centre <= high:
         # an interval narrows as 1/sqrt(n): the size at which it would clear t if the statistic
         # stayed where it is (an estimate, said as such)
@@ -346,6 +360,14 @@ def verdict_on_run(row: dict, values: dict) -> tuple[str, str]:
         if found:
             return "undecided", straddle_reason(row, values, found, verdict)
     return verdict, reason
+
+
+def verdict_as_written(row: dict, values: dict) -> tuple[str, str]:
+    """(verdict, reason template) of the rule as its cases say, with its ``min_samples`` but
+    without the vocabulary check of :func:`verdict_on_run`: what an original rule said."""
+    if "min_samples" in row and values[row["n_samples"]] < row["min_samples"]:
+        return "undecided", too_few_samples(row, values[row["n_samples"]])
+    return rule_verdict(row, values)[:2]
 
 
 def original_rule(row: dict) -> dict | None:
@@ -441,8 +463,8 @@ def _straddle_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> bo
             sides = [verdicts_over_bands(row, dict(bands, **dict.fromkeys(names, (x, x))),
                                          straddle=False)
                      for x in (math.nextafter(t, -math.inf), t, math.nextafter(t, math.inf))]
-            if len(set().union(*sides)) == 1:
-                continue                          # the same verdict on both sides of t
+            if sides[0] == sides[1] == sides[2]:
+                continue                          # the same verdicts on both sides of t
             states.append(True if low_max < t < high_min else
                           None if low_min <= t <= high_max else False)
     if any(state is True for state in states):
@@ -466,9 +488,12 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]],
         if n_low < row["min_samples"]:
             possible.add("undecided")
 
+    straddles = []                                # computed once, on the first decided verdict
+
     def add(verdict: str) -> None:
-        state = (_straddle_over_bands(row, bands)
-                 if straddle and verdict in DECIDED_VERDICTS else False)
+        if straddle and verdict in DECIDED_VERDICTS and not straddles:
+            straddles.append(_straddle_over_bands(row, bands))
+        state = straddles[0] if straddle and verdict in DECIDED_VERDICTS else False
         if state is not True:
             possible.add(verdict)
         if state is not False:

@@ -35,6 +35,7 @@ from railpaper.pipeline.claim_rules import (
     is_untestable,
     original_rule,
     rule_metrics,
+    verdict_as_written,
     verdict_on_run,
 )
 from railpaper.pipeline.ledger_figure import plot_ledger
@@ -129,17 +130,18 @@ def _ours(row: dict, values: dict) -> tuple[str, object, object, object, object]
     return text, value, low, high, n
 
 
-def judge(row: dict, values: dict) -> tuple[str, str]:
+def judge(row: dict, values: dict, as_written: bool = False) -> tuple[str, str]:
     """Verdict and formatted reason of one row on a run's metric values.
 
-    ``("missing", ...)`` when a metric the rule reads is absent.
+    ``("missing", ...)`` when a metric the rule reads is absent.  ``as_written``: the rule's
+    cases alone, without the vocabulary check (how an original rule is shown).
     """
     if is_untestable(row):
         return row["otherwise"]["verdict"], _format(row["otherwise"]["reason"], values)
     absent = [name for name in rule_metrics(row) if name not in values]
     if absent:
         return "missing", f"the run has no metric {absent[0]}"
-    verdict, reason = verdict_on_run(row, values)
+    verdict, reason = (verdict_as_written if as_written else verdict_on_run)(row, values)
     return verdict, _format(reason, values)
 
 
@@ -180,7 +182,8 @@ def chapter_rows(chapter: str, claims: dict[str, dict], run: dict | None,
         if before is not None:
             r = row["revised_after_evidence"]
             revised = f"{r['when']}: {r['what']}. Why: {r['why']}"
-            original_verdict = ("missing" if run is None else judge(before, values)[0])
+            original_verdict = ("missing" if run is None else judge(before, values,
+                                                                       as_written=True)[0])
         rows.append(LedgerRow(chapter, key, row["claim"], row.get("source", ""), paper, ours,
                               verdict, reason, row.get("reading", ""), row.get("group", key),
                               row.get("statistic", ""), row.get("paper_value"), value, low,
@@ -293,7 +296,8 @@ def headline(rows: list[LedgerRow]) -> str:
     counted = [replace(r, verdict="not testable") if r.verdict == "attainable" else r
                for r in heads]
     # attainable by another method: that method's first row (its default reading) says so
-    attainable = sum(next((r.verdict for r in g if r.method), "") == "attainable" for g in groups)
+    attainable = sum(next((r.verdict for r in g if r.method), "") == "attainable"
+                     for g in groups if any(r.headline for r in g))
     text = f"{len(heads)} claims of the paper's methods: {summary(counted) or 'none'}"
     if attainable:
         text += (f"; {attainable} shown attainable by a method or a design that is not the "
@@ -326,17 +330,18 @@ def _row_detail(r: LedgerRow) -> str:
 
 def fold_inert_readings(group: list[LedgerRow]) -> list[LedgerRow]:
     """The rows of one claim with readings that change nothing folded together: rows with the
-    same verdict and the same reason (the evidence it quotes) become one row naming every
+    same paper value, statistic, verdict, reason and rule history become one row naming every
     reading (``a = b``)."""
     out: dict[tuple, LedgerRow] = {}
     for r in group:
-        key = (r.verdict, r.reason, r.method, r.original_verdict)
+        key = (r.verdict, r.reason, r.method, r.original_verdict, r.paper, r.ours, r.revised)
+        name = r.reading or "as stated"
         if key in out:
             first = out[key]
-            out[key] = replace(first, reading=f"{first.reading or 'as stated'} = "
-                               f"{r.reading or 'as stated'} (the readings change nothing here)"
-                               if "change nothing" not in first.reading else
-                               first.reading.replace(" (the readings", f" = {r.reading} (the readings"))
+            merged = (first.reading.replace(" (the readings", f" = {name} (the readings")
+                      if "change nothing" in first.reading else
+                      f"{first.reading or 'as stated'} = {name} (the readings change nothing here)")
+            out[key] = replace(first, reading=merged)
         else:
             out[key] = r
     return list(out.values())

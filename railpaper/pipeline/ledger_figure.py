@@ -49,7 +49,7 @@ def claim_position(row) -> float | None:
 
 def plot_ledger(rows, titles: dict[str, str], path: str | Path) -> Path:
     """Draw the headline rows of every chapter in ``rows`` and save the PNG at ``path``."""
-    chapters = list(dict.fromkeys(r.chapter for r in rows))
+    chapters = list(dict.fromkeys(r.chapter for r in rows)) or ["(no claims)"]
     heads = {c: [r for r in rows if r.chapter == c and r.headline] for c in chapters}
     heights = [max(len(h), 1) for h in heads.values()]
     fig, axes = plt.subplots(len(chapters), 1, figsize=(9, 0.28 * sum(heights) + 1.2 * len(chapters)),
@@ -76,7 +76,9 @@ def plot_ledger(rows, titles: dict[str, str], path: str | Path) -> Path:
     axes[-1, 0].set_xlabel("paper's value on our interval's scale (interval = [−1, 1])", fontsize=8)
     handles = [plt.Line2D([], [], marker="o", ls="", color=c, label=v)
                for v, c in VERDICT_COLOURS.items() if any(r.verdict == v and r.headline for r in rows)]
-    fig.legend(handles=handles, fontsize=7, loc="upper right", ncol=len(handles), frameon=False)
+    if handles:
+        fig.legend(handles=handles, fontsize=7, loc="upper right", ncol=len(handles),
+                   frameon=False)
     fig.subplots_adjust(left=0.5, right=0.98, top=1 - 0.5 / fig.get_figheight(), bottom=0.06,
                         hspace=0.6)
     path = Path(path)

@@ -141,3 +141,29 @@ def test_straddle_is_judged_by_the_verdict_not_by_any_threshold_inside():
     assert judge(row, dict(run, p_low=0.0))[0] == "undecided"    # touches 0: artefact or not
     assert judge(row, dict(run, p_low=-0.2))[0] == "undecided"   # straddles 0
     assert judge(row, dict(run, p_low=-0.5, p_high=-0.2))[0] == "differs"
+
+
+def test_the_original_rule_is_shown_as_written_and_the_changing_threshold_is_named():
+    """An original rule is judged by its cases alone (the vocabulary check is the revised
+    rule's); the straddle reason names the threshold where the verdict changes, not the first
+    one inside; the sample estimate is given only for the row's own confidence interval."""
+    from railpaper.pipeline.claim_rules import straddled_thresholds, verdict_as_written
+    row = {"rule": "r", "primary": "m", "interval": ["m_low", "m_high"], "n_samples": "n",
+           "kind": "population",
+           "cases": [{"verdict": "reproduced", "reason": "meets",
+                      "when": [{"test": "range", "metrics": ["m_low"], "max": 9},
+                               {"test": "range", "metrics": ["m_high"], "min": 1}]}],
+           "otherwise": {"verdict": "differs", "reason": "no"}}
+    run = {"m": 5.0, "m_low": 3.0, "m_high": 20.0, "n": 100}
+    assert verdict_as_written(row, run)[0] == "reproduced"        # the overlap rule as written
+    found = straddled_thresholds(row, run)
+    assert [t for _, _, t in found] == [9.0]                      # changes at 9, not at 1
+    row2 = dict(row, cases=[{"verdict": "reproduced", "reason": "r", "when": [
+        {"test": "range", "metrics": ["m_low"], "above": 2},
+        {"test": "range", "metrics": ["m_high"], "below": 10}]}])
+    from railpaper.pipeline.ledger import judge
+    reason = judge(row2, {"m": 8.0, "m_low": 3.0, "m_high": 12.0, "n": 100})[1]
+    assert "threshold 10" in reason and "samples would decide" in reason
+    single = dict(row2, kind="single-run")
+    assert "samples would decide" not in judge(single, {"m": 8.0, "m_low": 3.0, "m_high": 12.0,
+                                                        "n": 100})[1]
