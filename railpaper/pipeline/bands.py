@@ -20,7 +20,7 @@ from pathlib import Path
 
 from railpaper.data import read_toml
 from railpaper.pipeline.chapters import chapter_spec, run_chapter
-from railpaper.pipeline.claim_rules import rule_metrics
+from railpaper.pipeline.claim_rules import condition_thresholds, rule_metrics
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 DEFAULT_STRIDE = 1000
@@ -33,15 +33,11 @@ def rule_thresholds(chapter: str) -> dict[str, list[float]]:
     for row in claims(chapter).values():
         for case in row.get("cases", []):
             for cond in case.get("when", []):
-                ts = [cond[k] for k in ("min", "max", "above", "below") if k in cond]
+                # a constant only: a reference metric moves, a flag or text is no threshold
                 ref = None if "reference" in cond else cond.get("value", row.get("paper_value"))
-                if isinstance(ref, (int, float)) and not isinstance(ref, bool):
-                    if cond["test"] == "within_abs":
-                        ts += [ref - cond["tolerance"], ref + cond["tolerance"]]
-                    elif cond["test"] == "within_factor":
-                        ts += [ref / cond["factor"], ref * cond["factor"]]
-                    elif cond["test"] == "equals":
-                        ts.append(ref)
+                constant = cond["test"] == "range" or (
+                    isinstance(ref, (int, float)) and not isinstance(ref, bool))
+                ts = condition_thresholds(cond, row, {}) if constant else []
                 for metric in cond.get("metrics", []):
                     out.setdefault(metric, []).extend(float(t) for t in ts)
         if "min_samples" in row:
