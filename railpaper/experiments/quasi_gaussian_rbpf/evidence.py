@@ -82,6 +82,20 @@ def threshold_effect(table: pd.DataFrame, name: str) -> np.ndarray:
     return worst_abs_z(table, name + NO_THRESHOLD) - worst_abs_z(table, name)
 
 
+def _per_record(table: pd.DataFrame, par: str, name: str):
+    """(column, metric stem, per-record values) of the settling steps and |errors| of filter
+    ``name`` (the posterior has no step-60 settling column)."""
+    columns = [("settling_step", "mc_settling_step", False),
+               ("short_settling_step", "mc_short_settling_step", False),
+               ("final_error", "mc_abs_final_error", True),
+               ("short_error", "mc_abs_short_error", True)]
+    for column, stem, absolute in columns:
+        if name == "posterior" and column == "short_settling_step":
+            continue
+        values = table[f"{column}_{par}_{name}"]
+        yield column, f"{stem}_{par}_{name}", np.abs(values) if absolute else values
+
+
 def descriptive_metrics(table: pd.DataFrame, n_steps: int) -> dict:
     """Monte Carlo summaries shown by the chapter (no claim rule reads them)."""
     m = {"mc_records": len(table)}
@@ -134,20 +148,11 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
     m = {}
     for par in PARAMS:
         for name in FILTERS + ("posterior",):
-            m.update(median_interval(table[f"settling_step_{par}_{name}"]).metrics(
-                f"mc_settling_step_{par}_{name}"))
-            m.update(median_interval(np.abs(table[f"final_error_{par}_{name}"])).metrics(
-                f"mc_abs_final_error_{par}_{name}"))
-            m.update(median_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
-                f"mc_abs_short_error_{par}_{name}"))
-        for name in FILTERS:                  # where one run falls: the single-run rows, at
-            for end in ("", "short_"):        # both ends of the horizon bracket
-                m.update(prediction_interval(table[f"{end}settling_step_{par}_{name}"]).metrics(
-                    f"mc_{end}settling_step_{par}_{name}"))
-            m.update(prediction_interval(np.abs(table[f"final_error_{par}_{name}"])).metrics(
-                f"mc_abs_final_error_{par}_{name}"))
-            m.update(prediction_interval(np.abs(table[f"short_error_{par}_{name}"])).metrics(
-                f"mc_abs_short_error_{par}_{name}"))
+            for column, metric, values in _per_record(table, par, name):
+                if column != "short_settling_step":       # the median: every column but this
+                    m.update(median_interval(values).metrics(metric))
+                if name in FILTERS:   # where one run falls (single-run rows, both bracket ends)
+                    m.update(prediction_interval(values).metrics(metric))
         for name in FILTERS:
             inside = int(np.sum(np.abs(table[f"final_z_{par}_{name}"]) <= Z_SATISFACTORY))
             m.update(proportion_interval(inside, n).metrics(f"mc_within_2std_rate_{par}_{name}"))
