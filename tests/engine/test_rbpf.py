@@ -61,6 +61,36 @@ def test_rbpf_at_true_parameters_equals_one_kalman_filter(record, options):
     np.testing.assert_allclose(run.theta_std, 0.0, atol=1e-12)
 
 
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_working_scheme_tempers_the_likelihood_by_k_over_T(record, engine):
+    """The working scheme's weights are exp(Σ_j min(1, j / T) log p(y_j | y_1..j−1, θ_i)) over
+    the first T steps, then the plain likelihood: computed here from one filterpy filter per
+    particle.  No resampling (ESS threshold 0) and no move, so the weights carry the whole
+    schedule; a changed schedule (j − 1, (j / T)², another T) fails this test."""
+    T, K = 15, len(record.y)
+    theta = np.column_stack([np.linspace(-0.9, -0.5, 12), np.linspace(1.3, 1.7, 12)])
+    run = run_rbpf(paper004_system(Q_VAR, R_VAR), record.y, theta, np.zeros(2), P0,
+                   np.random.default_rng(0), scheme="working", move=False, ess_fraction=0.0,
+                   tempering_steps=T, engine=engine)
+    loglik = np.empty((len(theta), K))
+    for i, (a, b) in enumerate(theta):
+        kf = KalmanFilter(dim_x=2, dim_z=2)
+        kf.x, kf.P, kf.F = np.zeros(2), P0.copy(), np.array([[0.0, 1.0], [a, b]])
+        kf.Q, kf.H, kf.R = PAPER004_G @ (Q_VAR * np.eye(2)) @ PAPER004_G.T, PAPER004_H, R_VAR * np.eye(2)
+        for k in range(K):
+            kf.predict()
+            kf.update(record.y[k])
+            loglik[i, k] = kf.log_likelihood
+    beta = np.minimum(1.0, np.arange(1, K + 1) / T)
+    log_w = np.cumsum(beta * loglik, axis=1)                               # (N, K)
+    w = np.exp(log_w - log_w.max(axis=0))
+    w /= w.sum(axis=0)
+    assert not run.resampled.any()
+    np.testing.assert_allclose(run.theta_mean, w.T @ theta, rtol=0, atol=1e-9)
+    assert np.isnan(run.log_evidence[:T - 1]).all()              # β < 1: no evidence
+    assert np.isfinite(run.log_evidence[T - 1:]).all()
+
+
 def test_rbpf_with_known_input_eq18_equals_kalman_filter():
     truth = np.array([-0.3, 0.6, 0.5, -0.4])
     sim = simulate_eq18(truth, 0.1, 0.1, 30, np.random.default_rng(2), p0_std=0.1)
