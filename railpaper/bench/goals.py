@@ -9,20 +9,31 @@ from __future__ import annotations
 from railpaper.bench.verdict import WITHHELD, is_ratio, ratio_verdict
 
 #: The engine issue's goals at N = 1000 on the benchmark machine: (label, payload key, sense,
-#: target).  ">=": the measured median must reach the target; "<=": must not exceed it.
+#: target).  ">=": the measured median must reach the target; "<=": must not exceed it.  Real
+#: time is 1000 steps/s (the lateral records are sampled at 1 kHz); the IBIS target is three
+#: times the 55 steps/s measured when the goal was set (2026-12-03); the bank's share of the
+#: dgemm rate is read from the run's FLOP block.
 GOALS = (
-    ("working scheme (tempered Liu-West), steps 1-1000", "steps_per_s_rbpf_lateral_N1000_first1000",
-     ">=", 2000.0),
-    ("posterior-targeting scheme (IBIS), first steps", "steps_per_s_ibis_lateral_N1000_first",
-     ">=", 2000.0),
-    ("paper scheme (every particle moved every step)",
+    ("working scheme (tempered Liu-West), steps 1-1000, real time",
+     "steps_per_s_rbpf_lateral_N1000_first1000", ">=", 1000.0),
+    ("paper scheme (every particle moved every step), real time",
      "steps_per_s_rbpf_lateral_N1000_paper_scheme", ">=", 1000.0),
     ("Q-GRBPF time / RBPF time (paper scheme)", "time_ratio_qgrbpf_over_rbpf_N1000", "<=", 1.0),
+    ("posterior-targeting scheme (IBIS), first steps", "steps_per_s_ibis_lateral_N1000_first",
+     ">=", 165.0),
     ("x filterpy-per-particle RBPF, working scheme", "speedup_vs_filterpy_lateral_N1000",
-     ">=", 100.0),
+     ">=", 50.0),
     ("x filterpy-per-particle RBPF, paper scheme",
-     "speedup_vs_filterpy_lateral_N1000_paper_scheme", ">=", 100.0),
+     "speedup_vs_filterpy_lateral_N1000_paper_scheme", ">=", 50.0),
+    ("Kalman bank GFLOP/s / dgemm GFLOP/s (same run)", "bank_fraction_of_dgemm", ">=", 0.30),
 )
+
+
+def _value(payload: dict, key: str):
+    """A goal's measured value: a top-level payload key, else one of the FLOP block's."""
+    if key in payload:
+        return payload[key]
+    return (payload.get("flops_N1000") or {}).get(key)
 
 
 def goal_rows(payload: dict) -> list[dict]:
@@ -33,7 +44,7 @@ def goal_rows(payload: dict) -> list[dict]:
     spread = payload.get("spread", {})
     out = []
     for label, key, sense, target in GOALS:
-        value = payload.get(key)
+        value = _value(payload, key)
         if value is None or (is_ratio(key) and not ok):
             out.append(dict(goal=label, key=key, sense=sense, target=target, measured=None,
                             spread=None, met=None, factor_missing=None,

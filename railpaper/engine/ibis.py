@@ -32,11 +32,18 @@ needed and a proposal outside the box is rejected without a likelihood evaluatio
           original choice): a fresh draw per accepted move, efficient once the posterior is
           near-Gaussian, poor while it is not (early steps, box edges).
 
-Cost: a move costs N × t filter steps, so the total is dominated by the late resampling events.
-Paper 003's lateral model (16 states, d = 5, K = 500, N = 500): ≈ 36 events and 5 M filter
-steps with ``"independent"`` (2 moves per event, acceptance 0.35–0.75), ≈ 3 × that with
-``"rw"`` (6–8 moves per event); over seeds and both proposals the posterior means scatter by
-≤ 0.1 posterior sd at N = 500.
+Cost: a move costs N × t filter steps (every proposal's filter re-runs steps 1..t), so the total
+is dominated by the late resampling events and by the number of moves per event: ``min_moves =
+1`` lets the displacement rule stop after one move once the proposal fits the posterior (the
+independent proposal then decorrelates in one accepted draw), ``min_moves = 2`` always pays two.
+
+Waste-free moves (``chain_length`` P > 1; Dau & Chopin 2022, *JRSS B* 84, 114–148, as in the
+``particles`` package's ``smc_samplers``): resample only M = N / P chain starts and keep every
+state of their P-long MH chains, so an event costs N − M full-history evaluations instead of
+(number of moves) × N.  The particles are then more correlated (each chain start is kept, and
+resampled starts repeat), so at equal N the posterior summaries carry more Monte Carlo error;
+whether fewer evaluations at more error pays depends on the model and on how cheap a small
+bank's evaluation is (both kinds of move are checked against exact posteriors in the tests).
 
 Between resampling events the particles' matrices are fixed, so the bank runs over chunks of
 steps in one call (as :meth:`railpaper.engine.rbpf.RaoBlackwellisedPF.steps`); the chunk is
@@ -52,7 +59,8 @@ from typing import Callable
 import numpy as np
 
 from railpaper.engine.kalman_bank import kalman_run
-from railpaper.engine.linear_gaussian import LinearGaussianBatch, merge_systems
+from railpaper.engine.linear_gaussian import (LinearGaussianBatch, concat_systems,
+                                              merge_systems)
 from railpaper.engine.particles import (gaussian_log_density, normalise_log_weight_columns,
                                         systematic_resample, weighted_mean_cov,
                                         weighted_quantiles)
@@ -179,6 +187,9 @@ class _Sampler:
     def resample_move(self, t: int, weights: np.ndarray) -> None:
         """Resample (systematic) and move with π_t-invariant MH kernels; t steps are done."""
         mean, cov = weighted_mean_cov(self.theta, weights)
+        if self.o["rejuvenate"] and self.o["chain_length"] > 1:
+            self._waste_free(t, weights, mean, jittered_cholesky(cov, self.upper - self.lower))
+            return
         idx = systematic_resample(weights, self.rng)
         self.theta, self.x, self.P = self.theta[idx], self.x[idx], self.P[idx]
         self.loglik, self.sys = self.loglik[idx], self.sys.take(idx)
@@ -190,33 +201,70 @@ class _Sampler:
         root = jittered_cholesky(cov, self.upper - self.lower)
         start, moved, rates, m, D = self.theta.copy(), np.zeros(N, bool), [], 0, 0.0
         while m < self.o["max_moves"]:
-            accept = self._move(t, mean, root)
+            accept = self._move(t, mean, root, self)
             moved |= accept
             rates.append(accept.mean())
             m += 1
-            if self.o["proposal"] == "rw":
-                self.scale = float(np.clip(self.scale * np.exp(rates[-1]
-                                                               - self.o["target_acceptance"]),
-                                           1e-4, 10.0))
-            white = np.linalg.solve(root, (self.theta - start).T)          # (d, N)
-            D = float(np.mean(np.sum(white * white, axis=0))) / (2 * d)
+            self._adapt(rates[-1])
+            D = self._displacement(start, self.theta, root)
             if m >= self.o["min_moves"] and D >= self.o["decorrelation"]:
                 break
         self.events.append((t, m, float(np.mean(rates)), D, float(moved.mean())))
 
-    def _move(self, t, mean, root) -> np.ndarray:
-        """One MH move of every particle; returns which particles accepted (N,)."""
-        N, d = self.theta.shape
+    def _waste_free(self, t: int, weights: np.ndarray, mean: np.ndarray, root: np.ndarray
+                    ) -> None:
+        """Waste-free rejuvenation (Dau & Chopin 2022): M = N / P chain starts drawn from the
+        weighted particles, each moved P − 1 times by the MH kernel; all M P states of the
+        chains, starts included, are the new particles, with equal weights."""
+        P_len = self.o["chain_length"]
+        N = self.theta.shape[0]
+        M = N // P_len
+        idx = systematic_resample(weights, self.rng, M)
+        head = _Chains(self.theta[idx], self.x[idx], self.P[idx], self.loglik[idx],
+                       self.sys.take(idx))
+        states, start, moved, rates = [head.snapshot()], head.theta.copy(), np.zeros(M, bool), []
+        for _ in range(P_len - 1):
+            accept = self._move(t, mean, root, head)
+            moved |= accept
+            rates.append(accept.mean())
+            self._adapt(rates[-1])
+            states.append(head.snapshot())
+        self.theta = np.concatenate([c.theta for c in states])
+        self.x = np.concatenate([c.x for c in states])
+        self.P = np.concatenate([c.P for c in states])
+        self.loglik = np.concatenate([c.loglik for c in states])
+        self.sys = concat_systems([c.sys for c in states], [M] * P_len)
+        self.log_w = np.full(N, -np.log(N))
+        D = self._displacement(start, head.theta, root)
+        self.events.append((t, P_len - 1, float(np.mean(rates)), D, float(moved.mean())))
+
+    def _adapt(self, rate: float) -> None:
+        """Random walk: log c += acceptance − target (bounded)."""
+        if self.o["proposal"] == "rw":
+            self.scale = float(np.clip(self.scale * np.exp(rate - self.o["target_acceptance"]),
+                                       1e-4, 10.0))
+
+    @staticmethod
+    def _displacement(start: np.ndarray, theta: np.ndarray, root: np.ndarray) -> float:
+        """D / (2d): mean squared Mahalanobis displacement from ``start``, Σ = root rootᵀ."""
+        white = np.linalg.solve(root, (theta - start).T)                # (d, N)
+        return float(np.mean(np.sum(white * white, axis=0))) / (2 * start.shape[1])
+
+    def _move(self, t, mean, root, pop) -> np.ndarray:
+        """One MH move of every particle of ``pop`` (the sampler itself, or the heads of
+        waste-free chains: anything with theta, x, P, loglik, sys), updated in place;
+        returns which particles accepted (M,)."""
+        N, d = pop.theta.shape
         z = self.rng.standard_normal((N, d))
         log_u = np.log(self.rng.random(N))
         if self.o["proposal"] == "rw":
-            prop = self.theta + np.sqrt(self.scale) * z @ root.T
+            prop = pop.theta + np.sqrt(self.scale) * z @ root.T
             log_q = np.zeros(N)                               # symmetric proposal
         else:
             c = self.o["independent_inflation"]
             prop = mean + c * z @ root.T
             cov = c * c * root @ root.T
-            log_q = (gaussian_log_density(self.theta, mean, cov)      # q(θ) − q(θ')
+            log_q = (gaussian_log_density(pop.theta, mean, cov)       # q(θ) − q(θ')
                      - gaussian_log_density(prop, mean, cov))
         inside = np.all((prop >= self.lower) & (prop <= self.upper), axis=1)
         accept = np.zeros(N, bool)
@@ -228,23 +276,40 @@ class _Sampler:
             ll = np.nan_to_num(ll.sum(axis=1), nan=-np.inf)
             self.n_evals += ids.size
             with np.errstate(invalid="ignore"):
-                log_alpha = ll - self.loglik[ids] + log_q[ids]
+                log_alpha = ll - pop.loglik[ids] + log_q[ids]
             ok = log_u[ids] < log_alpha                         # NaN/−inf: rejected
             accept[ids[ok]] = True
-            self.sys = self._merge_subset(ids, ok, sys_p)
-            self.theta[ids[ok]] = prop[ids[ok]]
-            self.x[ids[ok]], self.P[ids[ok]] = x_p[ok], P_p[ok]
-            self.loglik[ids[ok]] = ll[ok]
+            pop.sys = _merge_subset(pop.sys, N, ids, ok, sys_p)
+            pop.theta[ids[ok]] = prop[ids[ok]]
+            pop.x[ids[ok]], pop.P[ids[ok]] = x_p[ok], P_p[ok]
+            pop.loglik[ids[ok]] = ll[ok]
         return accept
 
-    def _merge_subset(self, ids, ok, sys_p) -> LinearGaussianBatch:
-        """The particles' matrices with those of the accepted proposals ``ids[ok]`` swapped in."""
-        N = self.theta.shape[0]
-        full_new = np.zeros(N, bool)
-        full_new[ids[ok]] = True
-        where = np.zeros(N, int)
-        where[ids] = np.arange(ids.size)
-        return merge_systems(self.sys, sys_p.take(where), full_new)
+
+@dataclass
+class _Chains:
+    """The current states of waste-free chains (one row per chain)."""
+
+    theta: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    loglik: np.ndarray
+    sys: LinearGaussianBatch
+
+    def snapshot(self) -> "_Chains":
+        """A copy that later in-place moves of the chains leave alone (``sys`` is replaced,
+        never written into, by a move)."""
+        return _Chains(self.theta.copy(), self.x.copy(), self.P.copy(), self.loglik.copy(),
+                       self.sys)
+
+
+def _merge_subset(sys: LinearGaussianBatch, N: int, ids, ok, sys_p) -> LinearGaussianBatch:
+    """The N particles' matrices with those of the accepted proposals ``ids[ok]`` swapped in."""
+    full_new = np.zeros(N, bool)
+    full_new[ids[ok]] = True
+    where = np.zeros(N, int)
+    where[ids] = np.arange(ids.size)
+    return merge_systems(sys, sys_p.take(where), full_new)
 
 
 def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray, lower, upper,
@@ -252,8 +317,8 @@ def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
              n_particles: int = 1000, ess_fraction: float = 0.5, proposal: str = "rw",
              min_moves: int = 2, max_moves: int = 20, decorrelation: float = 0.5,
              target_acceptance: float = 0.25, independent_inflation: float = 1.2,
-             rejuvenate: bool = True, theta0: np.ndarray | None = None, max_chunk: int = 64,
-             progress: Callable[[float, str], None] | None = None) -> IBISRun:
+             rejuvenate: bool = True, chain_length: int = 1, theta0: np.ndarray | None = None,
+             max_chunk: int = 64, progress: Callable[[float, str], None] | None = None) -> IBISRun:
     """Exact-posterior SMC (IBIS) of θ under a uniform prior on the box [lower, upper].
 
     Parameters
@@ -288,6 +353,11 @@ def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
         Scale of the independent proposal's standard deviations relative to the particles'.
     rejuvenate : bool
         False: resample without moving (degenerates; kept to show why the moves matter).
+    chain_length : int
+        1: resample N particles and move each ``min_moves`` … ``max_moves`` times (above).
+        P > 1: waste-free moves (Dau & Chopin 2022): resample N / P chain starts and keep all
+        N states of their P-long MH chains (``min_moves``, ``max_moves`` and
+        ``decorrelation`` are then unused).  N must be a multiple of P.
     theta0 : ndarray, (N, d), optional
         Initial particles (default: N uniform draws on the box).
     max_chunk : int
@@ -306,7 +376,14 @@ def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
     lower, upper = np.atleast_1d(np.asarray(lower, float)), np.atleast_1d(np.asarray(upper, float))
     if not np.all(upper > lower):
         raise ValueError("the prior box needs upper > lower in every parameter")
+    if int(chain_length) < 1:
+        raise ValueError(f"chain_length must be at least 1, got {chain_length}")
+    n_total = int(n_particles) if theta0 is None else int(np.asarray(theta0).shape[0])
+    if n_total % int(chain_length):
+        raise ValueError(f"waste-free IBIS needs the {n_total} particles to be a multiple of "
+                         f"chain_length = {chain_length}")
     opts = dict(n_particles=int(n_particles), rejuvenate=bool(rejuvenate), proposal=proposal,
+                chain_length=int(chain_length),
                 min_moves=int(min_moves), max_moves=int(max_moves),
                 decorrelation=float(decorrelation),
                 target_acceptance=float(target_acceptance),

@@ -59,17 +59,17 @@ def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
-            record):  # pragma: no cover - compiled
+            record, block):  # pragma: no cover - compiled
     N, n = x_out.shape
     p = H.shape[1]
     m = B.shape[2]
     n_steps = Y.shape[0]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
-    n_blocks = (N + BLOCK - 1) // BLOCK
+    n_blocks = (N + block - 1) // block
     for b in numba.prange(n_blocks):
-        lo = b * BLOCK
-        nb = min(BLOCK, N - lo)
+        lo = b * block
+        nb = min(block, N - lo)
         Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
         anc = ancestors[lo:lo + nb]               # x, P from the ancestor: a resampling's copy
@@ -187,6 +187,15 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
                     P_out[lo + q, i, j] = Pl[i, j, q]
 
 
+def block_size(N: int) -> int:
+    """Filters per block for a bank of N: :data:`BLOCK`, or half the bank when it holds at most
+    one block, so that a small bank (a waste-free IBIS chain step, say) still gives both
+    cores a block.  Every filter's arithmetic is the same in any block (the SIMD loops run
+    over filters, never across them), so the choice changes the speed, not the bits
+    (tests/engine/test_kalman_bank.py)."""
+    return BLOCK if N > BLOCK else max(1, (N + 1) // 2)
+
+
 def multiply_adds(n: int, p: int, m: int) -> int:
     """Multiply-adds of one filter's step in :func:`_kf_run` (as the kernel runs it, dense H).
 
@@ -265,7 +274,7 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     _kf_run(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
             _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, _stack(system.H, (p, n)),
             _stack(system.R, (p, p)), Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
-            record)
+            record, block_size(N))
     if record:
         return x_out, P_out, loglik, x_hist, var_hist
     return x_out, P_out, loglik

@@ -68,6 +68,20 @@ def merge_systems(old: LinearGaussianBatch, new: LinearGaussianBatch, take_new: 
                                  for k in ("F", "Q", "H", "R", "B")))
 
 
+def concat_systems(batches: list[LinearGaussianBatch], sizes: list[int]) -> LinearGaussianBatch:
+    """The models of ``batches`` one after another (batch j holds ``sizes[j]`` models); a matrix
+    shared by every batch (the same 2-D array) stays shared."""
+    def join(mats):
+        if mats[0] is None:
+            return None
+        if all(M.ndim == 2 for M in mats) and all(np.array_equal(mats[0], M) for M in mats):
+            return mats[0]
+        return np.concatenate([np.broadcast_to(M, (k,) + M.shape[-2:])
+                               for M, k in zip(mats, sizes)])
+    return LinearGaussianBatch(*(join([getattr(b, k) for b in batches])
+                                 for k in ("F", "Q", "H", "R", "B")))
+
+
 class LinearGaussianSystem(Protocol):
     """A model as the engine sees it: ``system(theta)`` gives the matrices of N models.
 

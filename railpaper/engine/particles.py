@@ -56,19 +56,31 @@ def _cumulative(weights: np.ndarray) -> np.ndarray:
     return c / c[-1]                              # c[-1] is then exactly 1.0
 
 
-def systematic_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Systematic resampling: one uniform offset, N evenly spaced points on the weight CDF.
+def systematic_resample(weights: np.ndarray, rng: np.random.Generator,
+                        size: int | None = None) -> np.ndarray:
+    """Systematic resampling: one uniform offset, M evenly spaced points on the weight CDF.
 
     Indices are clipped to ``N - 1``, so a cumulative sum that falls short of one by rounding
     (or a point that rounds up to 1.0) can never index past the last particle.
 
+    Parameters
+    ----------
+    weights : ndarray, (N,)
+        Normalised weights.
+    rng : numpy.random.Generator
+    size : int, optional
+        M, the number of draws (default N; a waste-free IBIS event draws N / P chain starts).
+
     Returns
     -------
-    indices : ndarray of int, shape (N,)
+    indices : ndarray of int, shape (M,)
         Sorted ancestor indices.
     """
     n = len(weights)
-    points = (rng.random() + np.arange(n)) / n
+    m = n if size is None else int(size)
+    if m < 1:
+        raise ValueError(f"systematic_resample: size must be at least 1, got {m}")
+    points = (rng.random() + np.arange(m)) / m
     idx = np.searchsorted(_cumulative(weights), points, side="right")
     return np.minimum(idx, n - 1)
 

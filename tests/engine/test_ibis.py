@@ -15,7 +15,7 @@ import pytest
 from railpaper.engine import ibis as ibis_module
 from railpaper.engine.ibis import credible_interval_covers, run_ibis
 from railpaper.engine.particles import normalise_log_weight_columns, weighted_quantiles
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.linear_gaussian import LinearGaussianBatch, concat_systems
 from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.models.linear_toys import eq18_system, simulate_eq18
 
@@ -105,6 +105,22 @@ def test_scalar_posterior_matches_grid(proposal):
     assert np.all(np.abs(errors) <= SCALAR_TOL), errors
 
 
+@pytest.mark.parametrize("chain_length", [2, 5])
+def test_waste_free_scalar_posterior_matches_grid(chain_length):
+    """Waste-free moves (N / P chains of length P, all states kept) target the same posterior."""
+    run, errors = scalar_run(proposal="independent", chain_length=chain_length)
+    assert len(run.resample_steps) >= 3 and np.all(run.n_moves == chain_length - 1)
+    assert np.all(np.abs(errors) <= SCALAR_TOL), errors
+
+
+def test_waste_free_needs_a_multiple_of_the_chain_length():
+    y = scalar_record(10, seed=1)
+    for bad, match in ((3, "multiple"), (0, "at least 1")):
+        with pytest.raises(ValueError, match=match):
+            run_ibis(scalar_system, y, [BOX[0]], [BOX[1]], [0.0], [[1.0]],
+                     np.random.default_rng(0), n_particles=200, chain_length=bad)
+
+
 def test_scalar_log_evidence_matches_grid():
     """Σ_k log p̂(y_k | y_1..k−1) estimates log p(y_1..K) = log ∫ p(y | a) U(a) da (grid)."""
     y = scalar_record(200, seed=3)
@@ -157,22 +173,26 @@ def test_toy_posterior_matches_adaptive_metropolis():
     # <= 0.054 posterior sd and the sd one of <= 3 % (either proposal), and no bias beyond that
     # against a 32-chain reference; 0.25 sd and 12 % are >= 4 such sds plus the chains' own
     # error (mcse < 0.02 sd).
-    for proposal in ("rw", "independent"):
+    for options in (dict(proposal="rw"), dict(proposal="independent"),
+                    dict(proposal="independent", min_moves=1)):      # chapter 003's setting
         run = run_ibis(system, sim.y, TOY_LOW, TOY_HIGH, np.zeros(2), np.eye(2),
-                       np.random.default_rng(2), u=sim.u, n_particles=1000, proposal=proposal)
+                       np.random.default_rng(2), u=sim.u, n_particles=1000, **options)
         np.testing.assert_array_less(np.abs(run.mean[-1] - ref["mean"]), 0.25 * ref["sd"])
         np.testing.assert_array_less(np.abs(run.sd[-1] / ref["sd"] - 1), 0.12)
 
 
-def test_same_seed_same_bits_and_threads_do_not_matter():
+@pytest.mark.parametrize("chain_length", [1, 2])
+def test_same_seed_same_bits_and_threads_do_not_matter(chain_length):
     sim = simulate_eq18(TOY_TRUTH, TOY_NOISE, TOY_NOISE, 150, np.random.default_rng(4))
     args = (eq18_system(TOY_NOISE, TOY_NOISE), sim.y, TOY_LOW, TOY_HIGH, np.zeros(2), np.eye(2))
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = run_ibis(*args, np.random.default_rng(9), u=sim.u, n_particles=200)
+        one = run_ibis(*args, np.random.default_rng(9), u=sim.u, n_particles=200,
+                       chain_length=chain_length)
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        other = run_ibis(*args, np.random.default_rng(9), u=sim.u, n_particles=200)
+        other = run_ibis(*args, np.random.default_rng(9), u=sim.u, n_particles=200,
+                         chain_length=chain_length)
     finally:
         numba.set_num_threads(before)
     for field in ("mean", "sd", "q05", "q95", "ess", "theta", "weights", "resample_steps"):
@@ -205,9 +225,11 @@ def sbc_coverage(**options) -> float:
 COVERAGE_BAND = (0.84, 0.96)
 
 
-@pytest.mark.parametrize("proposal", ["rw", "independent"])
-def test_coverage_of_90_percent_intervals_is_90_percent(proposal):
-    assert COVERAGE_BAND[0] <= sbc_coverage(proposal=proposal) <= COVERAGE_BAND[1]
+@pytest.mark.parametrize("options", [dict(proposal="rw"), dict(proposal="independent"),
+                                     dict(proposal="independent", min_moves=1),
+                                     dict(proposal="independent", chain_length=2)])
+def test_coverage_of_90_percent_intervals_is_90_percent(options):
+    assert COVERAGE_BAND[0] <= sbc_coverage(**options) <= COVERAGE_BAND[1]
 
 
 def test_broken_samplers_fail_a_check(monkeypatch):
@@ -249,3 +271,13 @@ def test_credible_interval_covers_reads_the_interval_of_the_step():
     assert not credible_interval_covers(run, [lo - 1e-9], step=10)[0]
     with pytest.raises(ValueError):
         credible_interval_covers(run, [0.0], step=21)
+
+
+def test_concat_systems_stacks_per_model_matrices_and_keeps_shared_ones():
+    rng = np.random.default_rng(4)
+    a = LinearGaussianBatch(rng.standard_normal((3, 2, 2)), np.eye(2), [[1.0, 0.0]], [[0.5]])
+    b = LinearGaussianBatch(rng.standard_normal((2, 2, 2)), np.eye(2), [[1.0, 0.0]], [[0.7]])
+    ab = concat_systems([a, b], [3, 2])
+    np.testing.assert_array_equal(ab.F, np.concatenate([a.F, b.F]))
+    assert ab.Q.ndim == 2 and ab.H.ndim == 2 and ab.B is None       # shared by both: shared
+    np.testing.assert_array_equal(ab.R[:, 0, 0], [0.5, 0.5, 0.5, 0.7, 0.7])

@@ -12,7 +12,7 @@ from scipy.linalg import expm
 from railpaper.discretise import zoh
 from railpaper.engine.batch_expm import expm_stack, zoh_stack
 from railpaper.engine.kalman import predict, update
-from railpaper.engine.kalman_bank import kalman_run, kalman_step
+from railpaper.engine.kalman_bank import block_size, kalman_run, kalman_step
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.rbpf import RaoBlackwellisedPF, run_rbpf
 from railpaper.models import lateral_16state as L
@@ -164,6 +164,26 @@ def test_kalman_run_over_steps_is_bit_identical_to_kalman_step_step_by_step():
         assert np.array_equal(ll, loglik[:, k]) and np.array_equal(x, x_hist[:, k])
         assert np.array_equal(np.diagonal(P, axis1=1, axis2=2), var_hist[:, k])
     assert np.array_equal(x, x_end) and np.array_equal(P, P_end)
+
+
+def test_block_size_changes_no_bit():
+    """A filter's result does not depend on the bank it runs in: a bank of 40 (two blocks of
+    20) and of 1 (one block of 1) give the bits of the same filters inside a bank of 200
+    (blocks of 64, filters 0..39 in the first), so the block choice is speed only."""
+    rng = np.random.default_rng(12)
+    N, n, p, m = 200, 16, 5, 2
+    s = LinearGaussianBatch(np.stack([random_stable(rng, n) for _ in range(N)]),
+                            np.stack([random_spd(rng, n) for _ in range(N)]),
+                            rng.standard_normal((p, n)), random_spd(rng, p),
+                            rng.standard_normal((N, n, m)))
+    x, P = rng.standard_normal((N, n)), np.stack([random_spd(rng, n) for _ in range(N)])
+    Y, U = rng.standard_normal((9, p)), rng.standard_normal((9, m))
+    assert [block_size(k) for k in (1, 40, 64, 65, 200)] == [1, 20, 32, 64, 64]
+    full = kalman_run(x, P, s, Y, U)
+    for part in (slice(0, 40), slice(7, 8)):
+        small = kalman_run(x[part], P[part], s.take(np.arange(N)[part]), Y, U)
+        for a, b in zip(small, full):
+            assert np.array_equal(a, b[part])
 
 
 def test_ancestors_gather_equals_copying_the_resampled_filters():

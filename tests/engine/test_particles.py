@@ -51,6 +51,18 @@ def test_systematic_resample_counts_are_floor_or_ceil():
     assert np.all(np.abs(counts - 50 * w) < 1 + 1e-9)
 
 
+def test_systematic_resample_of_fewer_draws_keeps_floor_or_ceil_counts():
+    """M < N draws (waste-free chain starts): each count is floor or ceil of M w_i."""
+    rng = np.random.default_rng(3)
+    w = rng.random(200)
+    w /= w.sum()
+    for m in (1, 40, 125):
+        counts = np.bincount(systematic_resample(w, rng, m), minlength=200)
+        assert counts.sum() == m and np.all(np.abs(counts - m * w) < 1 + 1e-9)
+    with pytest.raises(ValueError, match="size"):
+        systematic_resample(w, rng, 0)
+
+
 def test_multinomial_search_follows_cdf_rule():
     w = np.array([0.1, 0.0, 0.6, 0.3])
     rng = np.random.default_rng(2)
