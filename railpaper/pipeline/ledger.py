@@ -389,6 +389,15 @@ def chapter_claims(chapter: str, out_dir: str | Path) -> str:
             "readings).\n\n" + chapter_table(rows))
 
 
+def chapter_claims_figure(chapter: str, out_dir: str | Path) -> Path:
+    """Draw the chapter's claims (each paper value against our interval, marked by verdict)
+    from the run in ``out_dir`` into ``out_dir/claims_ledger.png``, the figure the chapter's
+    claims section shows above its table."""
+    rows, _ = run_rows(chapter, out_dir)
+    return plot_ledger(rows, {chapter: chapter_spec(chapter).title},
+                       Path(out_dir) / "claims_ledger.png")
+
+
 def chapter_rules(chapter: str) -> str:
     """How each of a chapter's verdicts is decided: the rule, fixed from the paper's wording,
     and why (a Markdown list: one item per claim, one sub-item per reading; a rule or a reason

@@ -79,7 +79,8 @@ def plot_ledger(rows, titles: dict[str, str], path: str | Path) -> Path:
     if handles:
         fig.legend(handles=handles, fontsize=7, loc="upper right", ncol=len(handles),
                    frameon=False)
-    fig.subplots_adjust(left=0.5, right=0.98, top=1 - 0.5 / fig.get_figheight(), bottom=0.06,
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0.5, right=0.98, top=1 - 0.5 / height, bottom=0.55 / height,
                         hspace=0.6)
     path = Path(path)
     fig.savefig(path, dpi=110)
