@@ -37,7 +37,7 @@ from railpaper.engine.qgrbpf import QuasiGaussianRBPF
 from railpaper.engine.rbpf import RaoBlackwellisedPF
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
-from railpaper.experiments.rbpf_parameter_estimation.posterior import PROPOSAL
+from railpaper.experiments.rbpf_parameter_estimation.posterior import MIN_MOVES, PROPOSAL
 from railpaper.models import lateral_16state as L
 from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 
@@ -140,7 +140,7 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
     run = run_ibis(prob["systems"]["compiled"], prob["y"][:n_steps], p["prior_low"] * theta,
                    p["prior_high"] * theta, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
                    np.random.default_rng(seed), u=prob["u"][:n_steps], n_particles=N,
-                   proposal=PROPOSAL)
+                   proposal=PROPOSAL, min_moves=MIN_MOVES)
     return ((time.perf_counter() - t0) / n_steps, len(run.resample_steps),
             int(run.n_filter_steps))
 

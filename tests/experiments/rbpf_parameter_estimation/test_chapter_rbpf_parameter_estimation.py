@@ -267,7 +267,7 @@ def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_r
         run = run_ibis(system, record.y, params["prior_low"] * theta,
                        params["prior_high"] * theta, np.zeros(16), 1e-10 * np.eye(16),
                        np.random.default_rng([params["seed"], 17]), u=record.u_mps,
-                       n_particles=params["ibis_particles"], proposal="independent")
+                       n_particles=params["ibis_particles"], proposal="independent", min_moves=1)
         paper = study.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
     post = lat.illustrated.posterior
     np.testing.assert_array_equal(post.mean, run.mean / theta)
