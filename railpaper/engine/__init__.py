@@ -22,7 +22,8 @@ never a vehicle, so the same code runs paper 004's toy and paper 003's 16-state 
 ``run_rbpf`` is paper 003's Rao–Blackwellised particle filter (a Kalman filter per parameter
 particle, Liu–West moves); ``grid_posterior`` the exact posterior of a low-dimensional θ on a
 grid; ``run_ibis`` the exact posterior of any θ by IBIS; ``run_qgrbpf`` paper 004's
-quasi-Gaussian RBPF.  The parts: :mod:`~railpaper.engine.kalman` (the numpy reference step,
+quasi-Gaussian RBPF; ``change_likelihoods`` and ``change_posterior`` the exact posterior of an
+abrupt parameter change (when, and to which value).  The parts: :mod:`~railpaper.engine.kalman` (the numpy reference step,
 Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank of N filters),
 :mod:`~railpaper.engine.batch_expm` and :mod:`~railpaper.engine.sparse_zoh` (exact ZOH of stacks
 of models), :mod:`~railpaper.engine.particles` (weights, resampling, Liu–West),
@@ -30,6 +31,8 @@ of models), :mod:`~railpaper.engine.particles` (weights, resampling, Liu–West)
 :mod:`~railpaper.engine.crlb` (Fisher information, Cramér–Rao bound).
 """
 
+from railpaper.engine.changepoint import (ChangeLikelihoods, ChangePosterior,
+                                         change_likelihoods, change_posterior)
 from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.grid_posterior import GridPosterior, grid_posterior
 from railpaper.engine.ibis import IBISRun, run_ibis
@@ -42,9 +45,9 @@ from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
 from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, run_filter,
                                    run_rbpf)
 
-__all__ = ["FilterRun", "GridPosterior", "IBISRun", "LinearGaussianBatch",
+__all__ = ["ChangeLikelihoods", "ChangePosterior", "FilterRun", "GridPosterior", "IBISRun", "LinearGaussianBatch",
            "LinearGaussianSystem", "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate",
-           "adaptive_metropolis", "crlb_std", "fisher_information", "grid_posterior",
+           "adaptive_metropolis", "change_likelihoods", "change_posterior", "crlb_std", "fisher_information", "grid_posterior",
            "kalman_log_posterior", "kalman_run", "kalman_step", "liu_west_move",
            "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf",
            "run_rbpf", "systematic_resample", "update"]
