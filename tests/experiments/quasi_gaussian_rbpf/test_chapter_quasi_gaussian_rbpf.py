@@ -160,7 +160,7 @@ def _outputs(notebook: dict, mime: str) -> str:
 @pytest.mark.slow
 def test_claims_glued_at_the_top_rules_at_the_end(quick_chapter_dir, built_book):
     """The ledger rows of this run are glued once (shown at the top), every row judged on >= 5
-    Monte Carlo samples but the computing-time and resampling-share rows (operations counted, deterministic); the claims section shows the rules; the page shows each claim once and each row once beneath."""
+    Monte Carlo samples but the computing-time, resampling-share and real-time rows (operations counted, deterministic); the claims section shows the rules; the page shows each claim once and each row once beneath."""
     from railpaper.pipeline.ledger import chapter_claims, chapter_rules, run_rows
     out = quick_chapter_dir(CHAPTER)
     rows, _ = run_rows(CHAPTER, out)
@@ -168,7 +168,7 @@ def test_claims_glued_at_the_top_rules_at_the_end(quick_chapter_dir, built_book)
     assert all(r.n_samples is not None and r.n_samples >= 5 for r in rows
                if r.ours != "-" and not r.ours.endswith(", deterministic"))
     counted = [r for r in rows if r.ours.endswith(", deterministic")]   # the operation counts
-    assert counted and all(r.key.startswith(("computing_time", "less_time", "resampling"))
+    assert counted and all(r.key.startswith(("computing_time", "less_time", "resampling", "real_time"))
                            for r in counted)
     notebook = json.loads((out / "quasi_gaussian_rbpf.ipynb").read_text())
     glued = [o["data"]["application/papermill.record/text/markdown"]
