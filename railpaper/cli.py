@@ -132,14 +132,15 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_bands(args) -> int:
-    from railpaper.pipeline.bands import compute_bands, write_bands
+    from railpaper.pipeline.bands import compute_bands, refloor, write_bands
     from railpaper.pipeline.chapters import chapter_spec
     chapter_spec(args.chapter)
     if args.stride < 1:
         raise ValueError(f"--stride must be >= 1, got {args.stride}")
     if args.out is not None and (not args.out.parent.is_dir() or args.out.is_dir()):
         raise ValueError(f"bands --out {args.out}: no such directory to write into, or a directory")
-    bands = compute_bands(args.chapter, args.quick, args.batches, args.stride, args.work)
+    bands = (refloor(args.chapter, args.quick) if args.refloor else
+             compute_bands(args.chapter, args.quick, args.batches, args.stride, args.work))
     target = write_bands(args.chapter, args.quick, bands, None if args.write else args.out)
     print(f"railpaper: {len(bands)} {'quick' if args.quick else 'full'} bands of {args.chapter} "
           f"written to {target}")
@@ -239,6 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="batch k runs with seed = k * stride (default 1000)")
     p.add_argument("--work", type=Path, help="where the batch runs go (default runs/bands-...); "
                    "finished batches there are reused")
+    p.add_argument("--refloor", action="store_true",
+                   help="run no batch: widen the stored bands to their rounding floor "
+                   "(±max(1e-9, 1e-9·|value|), capped at rule thresholds)")
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--out", type=Path, help="write a tolerances file here")
     target.add_argument("--write", action="store_true",

@@ -24,7 +24,14 @@ from railpaper.pipeline.claim_rules import condition_thresholds, rule_metrics
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 DEFAULT_STRIDE = 1000
+#: The least half-width of a float metric's band: relative 1e-9 of its size, and at least 1e-9
+#: absolute.  A statistic that every batch gives to the last bit (456.39365619408477 km/h, a
+#: rank correlation of 0.8 stored as 0.7999999999999999) rounds differently on another CPU's BLAS
+#: kernels, and a residual at rounding level (3e-13 here, 5e-13 there) has no last bit to keep.
+#: Integer-valued metrics (counts, ranks) keep exact bands.
 RELATIVE_FLOOR = 1e-9
+ABSOLUTE_FLOOR = 1e-9
+FLOOR_NOTE = "at least ±max(1e-9, 1e-9·|value|) for rounding on another CPU"
 
 
 def rule_thresholds(chapter: str) -> dict[str, list[float]]:
@@ -49,12 +56,23 @@ def band(values: list[float], thresholds: list[float], widen: float = 0.25
          ) -> tuple[float, float, str]:
     """(low, high, note) for one metric's batch values (see the module docstring)."""
     lo, hi = min(values), max(values)
-    exact = all(float(v).is_integer() for v in values)
-    # floats get at least a relative 1e-9 either side: a statistic that every batch gives to the
-    # last bit (a rank correlation of 0.8 stored as 0.7999999999999999) may round differently on
-    # another CPU; integer-valued metrics (counts, ranks) keep exact bands
-    pad = max(widen * (hi - lo), 0.0 if exact else RELATIVE_FLOOR * max(abs(lo), abs(hi)))
-    low, high, notes = lo - pad, hi + pad, []
+    pad = max(widen * (hi - lo), rounding_floor(values))
+    return _capped(lo, hi, lo - pad, hi + pad, thresholds)
+
+
+def rounding_floor(values: list[float]) -> float:
+    """The least half-width of a band (:data:`RELATIVE_FLOOR`, :data:`ABSOLUTE_FLOOR`); 0 for
+    integer-valued metrics."""
+    if all(float(v).is_integer() for v in values):
+        return 0.0
+    return max(ABSOLUTE_FLOOR, RELATIVE_FLOOR * max(abs(v) for v in values))
+
+
+def _capped(lo: float, hi: float, low: float, high: float, thresholds: list[float]
+            ) -> tuple[float, float, str]:
+    """Band [low, high] around the observed [lo, hi], each widening stopped halfway to a rule
+    threshold outside [lo, hi]; the note says where."""
+    notes = []
     for t in thresholds:
         if lo <= t <= hi and (lo != hi or t == lo):
             notes.append(f"observed range straddles the rule threshold {t:g}")
@@ -65,6 +83,28 @@ def band(values: list[float], thresholds: list[float], widen: float = 0.25
             high = (hi + t) / 2 if (hi + t) / 2 < t else hi
             notes.append(f"widening capped halfway to the threshold {t:g}")
     return low, high, "; ".join(dict.fromkeys(notes))
+
+
+def refloor(chapter: str, quick: bool) -> dict[str, tuple[float, float, str]]:
+    """The chapter's stored bands of one mode, each widened to at least its rounding floor
+    (:func:`rounding_floor` of its own ends; capped at rule thresholds as :func:`band` is),
+    without re-running any batch: for bands written before the floor existed."""
+    mode = "quick" if quick else "full"
+    stored = read_toml(chapter_data_dir(chapter) / "tolerances.toml").get(mode, {})
+    thresholds = rule_thresholds(chapter)
+    out = {}
+    for metric, entry in stored.items():
+        lo, hi, source = entry.get("min", -math.inf), entry.get("max", math.inf), entry["source"]
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            out[metric] = (lo, hi, source)
+            continue
+        pad = rounding_floor([lo, hi])
+        low, high, note = _capped(lo, hi, min(lo, (lo + hi) / 2 - pad), max(hi, (lo + hi) / 2 + pad),
+                                  thresholds.get(metric, []))
+        if (low, high) != (lo, hi) and FLOOR_NOTE not in source:
+            source += f"; {FLOOR_NOTE}" + (f" ({note})" if note else "")
+        out[metric] = (low, high, source)
+    return out
 
 
 def _batch_metrics(chapter: str, quick: bool, seed: int, work: Path) -> dict:

@@ -33,6 +33,32 @@ def test_float_point_bands_get_a_relative_floor_capped_at_thresholds():
     assert high < 0.8 and "capped" in note
 
 
+def test_rounding_level_bands_hold_the_values_another_cpu_gives():
+    """Seen on an AMD EPYC against bands written on another CPU: a critical speed that differs in
+    the 15th digit and residuals at rounding level (3.3e-13 there, 4.9e-13 here)."""
+    low, high, _ = band([456.39365619408477] * 10, [])
+    assert low <= 456.3936561940856 <= high and high - low < 1e-6
+    low, high, _ = band([3.279198621125877e-13] * 10, [])
+    assert low <= 4.947251029202918e-13 <= high and high <= 2e-9
+    low, high, note = band([1.1716e-11] * 10, [1e-9])                  # a rule reads 1e-9
+    assert high < 1e-9 and "capped" in note
+
+
+def test_refloor_widens_stored_point_bands_and_never_narrows(tmp_path, monkeypatch):
+    data = tmp_path / "ch"
+    data.mkdir()
+    (data / "tolerances.toml").write_text(
+        '[full.speed]\nmin = 456.39365619408477\nmax = 456.39365619408477\nsource = "s"\n'
+        '[full.count]\nmin = 3\nmax = 3\nsource = "c"\n'
+        '[full.wide]\nmin = 1.0\nmax = 2.0\nsource = "w"\n')
+    monkeypatch.setattr(bands_module, "chapter_data_dir", lambda chapter: data)
+    monkeypatch.setattr(bands_module, "rule_thresholds", lambda chapter: {})
+    out = bands_module.refloor("ch", quick=False)
+    assert out["speed"][0] <= 456.3936561940856 <= out["speed"][1]
+    assert "rounding on another CPU" in out["speed"][2]
+    assert out["count"] == (3, 3, "c") and out["wide"] == (1.0, 2.0, "w")
+
+
 def test_compute_bands_runs_disjoint_batches_and_resumes(monkeypatch, tmp_path):
     chapter = "reduced-order-observer"
     calls = []
