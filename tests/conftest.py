@@ -1,7 +1,8 @@
 """Shared fixtures: the quick book, built once per test session, and the quick runs read from it.
 
 The quick book (:func:`railpaper.pipeline.book.build_book` with ``quick=True``: the four chapters
-through papermill, the quick bench, ``jupyter-book -W -n``) is what CI must prove builds; its
+through papermill, the bench at its smoke size (every key of the Performance page, least work:
+its numbers are not what the tests check), ``jupyter-book -W -n``) is what CI must prove builds; its
 chapter folders are also the quick runs every chapter test reads.  It is started in a background
 process as soon as the tests are collected, so it runs on the second core while the unit tests
 run on the first; the modules that read it run last, and the first of them waits for it.
@@ -38,7 +39,7 @@ def _start_quick_book() -> None:
     book = root / "book"
     log = open(root / "build.log", "w")
     code = ("import sys; from railpaper.pipeline.book import build_book; "
-            "build_book(quick=True, book_dir=sys.argv[1], progress=False)")
+            "build_book(quick=True, book_dir=sys.argv[1], progress=False, smoke_bench=True)")
     process = subprocess.Popen([sys.executable, "-c", code, str(book)], cwd=REPO, stdout=log,
                                stderr=subprocess.STDOUT,
                                env=dict(os.environ, PYTHONWARNINGS="ignore"))

@@ -254,19 +254,27 @@ def _row(kind: str, engine: str, N: int, steps: int, seconds: list[float], **ext
                 repeats=len(seconds), us_per_particle_step=1e6 / s["median"] / N, **extra)
 
 
-def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
-    """Run the whole benchmark; returns the JSON payload (see railpaper.bench.report)."""
+def main_payload(quick: bool, progress=print, repeats: int = REPEATS, smoke: bool = False
+                 ) -> dict:
+    """Run the whole benchmark; returns the JSON payload (see railpaper.bench.report).
+
+    ``smoke``: the same payload from the least work that fills every key (2 alternations,
+    N = 100 and 1000 besides the memory probe, a few steps each) — for the test suite's book,
+    whose page structure is tested, not its numbers; it implies ``quick``."""
     loads = LoadLog()
-    sizes = dict(working=200 if quick else 1000, paper=40 if quick else 200,
-                 fp_working=30 if quick else 150, fp_paper=6 if quick else 25)
-    steady = dict(skip=1000 if quick else 2000, steps=200 if quick else 1000)
+    if smoke:
+        quick, repeats = True, 2
+    sizes = (dict(working=40, paper=10, fp_working=6, fp_paper=2) if smoke else
+             dict(working=200 if quick else 1000, paper=40 if quick else 200,
+                  fp_working=30 if quick else 150, fp_paper=6 if quick else 25))
+    steady = dict(skip=1000 if quick else 2000, steps=50 if smoke else 200 if quick else 1000)
     prob = lateral_problem(max(sizes["working"], steady["skip"] + steady["steps"]) + 10)
     progress("railpaper bench: compiling kernels")
     time_filter(prob, "rbpf-paper", 70, 3)
     time_filter(prob, "qgrbpf", 70, 3)
     loads.sample("start")
     rows, spread, ratios = [], {}, {}
-    Ns = (100, 1000, 10000) if quick else (100, 300, 1000, 3000, 10000)
+    Ns = (100, 1000) if smoke else (100, 1000, 10000) if quick else (100, 300, 1000, 3000, 10000)
     for N in Ns:
         scale = max(1, N // 1000)
         steps = {k: max(5, sizes[k] // scale) for k in ("working", "paper")}
@@ -296,7 +304,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
     resamplings = sorted({t[2] for t in timeline})
     rows.append(_row("rbpf-working", "compiled, settled", N, steady["steps"],
                      [t[1] for t in timeline]))
-    ibis_steps = 100 if quick else FIRST_STEPS
+    ibis_steps = 20 if smoke else 100 if quick else FIRST_STEPS
     progress(f"railpaper bench: IBIS N={N}, steps 1-{ibis_steps} x {repeats}")
     ibis = interleaved({"ibis": lambda: time_ibis(prob, N, ibis_steps)}, repeats)["ibis"]
     loads.sample("ibis")
@@ -326,7 +334,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
                              max_rel_theta_diff=diff))
             baselines[(kind, engine)] = r
     progress("railpaper bench: profile, gain settling and peak memory")
-    prof = profile_step(prob, 1000, 5 if quick else 20)
+    prof = profile_step(prob, 1000, 2 if smoke else 5 if quick else 20)
     budget = step_budget(prob, prof, 1000)
     settling = gain_settling(prob)
     mem = peak_memory_mb(10000, 3)
@@ -358,7 +366,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS) -> dict:
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
         resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
-        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, sizes=sizes, repeats=repeats,
+        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke, sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
         setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],
                    speed_kmh=p["speed_kmh"], ess_fraction=p["ess_fraction"],

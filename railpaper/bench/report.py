@@ -164,7 +164,7 @@ def setup_markdown(payload: dict) -> str:
         f"at N = 1000: working {z['working']}, paper and Q-GRBPF {z['paper']} (fewer at larger "
         f"N); baselines at N = {s['baseline_N']}: working {z['fp_working']}, paper "
         f"{z['fp_paper']} steps; the start-up rate over steps 1–{s['first_steps']}; "
-        f"{'quick' if payload['quick'] else 'full'} sizes.",
+        f"{size_name(payload)} sizes.",
         f"- **Repeats**: every compared set of filters is timed interleaved (A B C A B C …), "
         f"{payload['repeats']} alternations, a fresh filter with the same seed each time; rates "
         "are medians with the min–max over the alternations, ratios the median of the "
@@ -199,8 +199,13 @@ def format_markdown(payload: dict) -> str:
               f"is {mem['bank_arrays_mb']:.0f} MB (O(N n²)).",
               f"- Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, numpy "
               f"{m['numpy']} with {m['blas']}, numba {m['numba']} on {m['numba_threads']} threads; "
-              f"{'quick' if payload['quick'] else 'full'} sizes {payload['sizes']}."]
+              f"{size_name(payload)} sizes {payload['sizes']}."]
     return "\n".join(lines) + "\n"
+
+
+def size_name(payload: dict) -> str:
+    """'smoke', 'quick' or 'full': which sizes a payload was measured at."""
+    return "smoke" if payload.get("smoke") else "quick" if payload["quick"] else "full"
 
 
 def busy_note(machine: dict) -> str:
@@ -269,13 +274,15 @@ def findings_markdown(payload: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_performance(book_dir: Path) -> Path:
+def write_performance(book_dir: Path, smoke: bool = False) -> Path:
     """Run the quick benchmark for the book's Performance page: ``_generated/`` gets
     ``bench.json``, ``performance_setup.md``, ``performance_table.md``,
-    ``performance_findings.md``, ``performance_goals.md`` and ``performance_steps_per_s.png``."""
+    ``performance_findings.md``, ``performance_goals.md`` and ``performance_steps_per_s.png``.
+    ``smoke``: the smoke-sized bench (the test suite's book: every key, least work)."""
     out = Path(book_dir) / "_generated"
     out.mkdir(parents=True, exist_ok=True)
-    payload = engine.main_payload(True, progress=lambda m: print(m, file=sys.stderr))
+    payload = engine.main_payload(True, progress=lambda m: print(m, file=sys.stderr),
+                                  smoke=smoke)
     return write_performance_files(payload, out)
 
 

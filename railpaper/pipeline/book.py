@@ -66,11 +66,13 @@ def write_environment(book_dir: Path, lock_path: Path = REPO_DIR / "environment.
 
 
 def build_book(quick: bool = False, book_dir: str | Path | None = None,
-               progress: bool = True) -> Path:
+               progress: bool = True, smoke_bench: bool = False) -> Path:
     """Run every chapter into ``book_dir/chapters`` and build the HTML book strictly.
 
     ``book_dir`` defaults to the repository's ``book/``; another directory gets a copy of the
-    book sources first (the tests build into a temporary directory).
+    book sources first (the tests build into a temporary directory).  ``smoke_bench``: the
+    Performance page from the smoke-sized bench (the test suite, which tests the page's
+    structure, not its numbers).
 
     Returns
     -------
@@ -91,7 +93,7 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
     write_environment(book)
     if (book / "performance.md").exists():
         print("railpaper: engine benchmark (quick) for the performance page", file=sys.stderr)
-        write_performance(book)
+        write_performance(book, smoke=smoke_bench)
     write_toc(book, chapters)
     jupyter_book = Path(sys.executable).parent / "jupyter-book"
     command = [str(jupyter_book), "build", str(book), "-W", "-n", "--keep-going"]
