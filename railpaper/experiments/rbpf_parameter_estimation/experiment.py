@@ -62,7 +62,7 @@ def validate(p: dict) -> None:
     if p["spectrum"] not in track.SPECTRA:
         raise ParameterError(f"parameter 'spectrum': unknown spectrum {p['spectrum']!r}; "
                              f"one of {', '.join(track.SPECTRA)}")
-    for name in ("toy_seeds", "n_records"):
+    for name in ("toy_seeds", "n_records", "paper_records"):
         if p[name] >= 1000:
             raise ParameterError(f"parameter '{name}' must be < 1000 (seed batches 1000 apart are "
                                  f"disjoint), got {p[name]}")

@@ -23,7 +23,7 @@ and statistics over records (coverage, rates) go into the run's metrics by
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -249,6 +249,10 @@ class LateralPart:
         user's file.
     ekf_converged_count : int or None
         How many of the first record's EKF guesses end within 5 % of every parameter.
+    paper_only_norm : ndarray, shape (paper_records - n_records, K, 5)
+        Normalised paper-scheme estimates θ̂/θ of the records after ``runs`` (seeds
+        ``seed + n_records`` …), filtered by the paper scheme alone: its claims need more
+        records than the other estimators (:meth:`paper_scheme_norm` joins them).
     """
 
     fixed: dict
@@ -258,6 +262,14 @@ class LateralPart:
     critical_speed: pd.DataFrame
     crlb: pd.DataFrame | None = None
     ekf_converged_count: int | None = None
+    paper_only_norm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 5)))
+
+    def paper_scheme_norm(self) -> np.ndarray:
+        """The paper scheme's normalised estimates on every record, shape (paper_records, K,
+        5): those of ``runs``, then ``paper_only_norm``."""
+        first = self.stack("rbpf_paper_norm")
+        return np.concatenate([first, self.paper_only_norm]) if len(self.paper_only_norm) \
+            else first
 
     @property
     def illustrated(self) -> LateralRun:

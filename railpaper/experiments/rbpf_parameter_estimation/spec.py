@@ -15,8 +15,9 @@ SPEC = ChapterSpec(
     paper="003_106973ea68498aa8.txt",
     notebook="rbpf_parameter_estimation.ipynb",
     quick_sizes="toy as full (40 records x 500 steps, 300 particles, IBIS 1000); lateral: 5 "
-                "records (full: 30) x 500 steps, 200 particles, both schemes, one EKF guess each, "
-                "IBIS on 5 (full: 30) with 100 (250) particles; model error: 5 (20) records",
+                "records (full: 30, and the paper scheme alone on 80 more) x 500 steps, 200 "
+                "particles, both schemes, one EKF guess each, IBIS on 5 (full: 30) with 100 "
+                "(250) particles; model error: 5 (20) records",
     notebook_requires={"lateral": True},
     parameters=[
         P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1 and so on (toy and "
@@ -69,6 +70,11 @@ SPEC = ChapterSpec(
           positive=True),
         P("n_records", 30, "int", "lateral records (Monte Carlo samples, < 1000), each filtered "
           "by both RBPF schemes and one EKF guess", quick=5, minimum=2),
+        P("paper_records", 110, "int", "lateral records (seeds seed … seed + paper_records - 1, "
+          "< 1000) filtered by the paper-scheme RBPF, the sample of its two claims ('within 5 % "
+          "after 350 steps', 'unbiased'); the first n_records of them are the records above, the "
+          "rest get the paper scheme alone (fewer than n_records: n_records)", quick=5,
+          minimum=2),
         P("ekf_guesses", 10, "int", "initial parameter guesses of the lateral EKF on the "
           "illustrated record (the others get one each)", minimum=1),
         P("ekf_steps", 500, "int", "steps of each lateral EKF run (<= n_steps)", minimum=10),

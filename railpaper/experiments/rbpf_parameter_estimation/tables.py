@@ -150,7 +150,8 @@ def caption_values(result, params: dict) -> dict[str, str]:
                least_damped=number(m["least_damped_real_at_speed_per_s"], 3))
     for scheme in ("paper", "working"):                       # the claims' statistics
         rate = m.get(f"lateral_within_5pct_from_350_rate_{scheme}_scheme")
-        out[f"within_{scheme}"] = "—" if rate is None else f"{round(rate * n)} of {n}"
+        n_rate = m.get(f"lateral_within_5pct_from_350_rate_{scheme}_scheme_n", n)  # paper: more
+        out[f"within_{scheme}"] = "—" if rate is None else f"{round(rate * n_rate)} of {n_rate}"
         bias = m.get(f"lateral_bias_max_abs_{scheme}_scheme")
         out[f"bias_{scheme}"] = "—" if bias is None else f"{number(100 * bias, 2)} %"
     out.update(crlb_worst="—", crlb_worst_name="—", ekf_count="none (a user's record)")

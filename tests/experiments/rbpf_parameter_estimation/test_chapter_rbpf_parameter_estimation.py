@@ -29,11 +29,24 @@ REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme"
 
 @pytest.fixture(scope="module")
 def quick_result():
-    params = chapter.SPEC.resolve({}, quick=True)
+    """run() in this process at quick sizes with fewer records (the quick book's papermill run
+    at the full quick sizes is what the tolerance test reads); paper_records > n_records, so
+    records filtered by the paper scheme alone are in it."""
+    params = chapter.SPEC.resolve({"toy_seeds": 6, "n_records": 3, "ibis_records": 2,
+                                   "mismatch_records": 2}, quick=True)
+    assert params["paper_records"] > params["n_records"]
     return params, chapter.run(quick=True, **params)
 
 
-def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
+def test_quick_book_run_is_within_tolerances(quick_chapter_dir):
+    from railpaper.pipeline.check import check_chapter
+
+    rows = check_chapter("rbpf-parameter-estimation", quick_chapter_dir("rbpf-parameter-estimation"))
+    assert rows and all(r.status == "ok" for r in rows), [
+        (r.metric, r.value, r.band) for r in rows if r.status != "ok"]
+
+
+def test_quick_run_has_every_key(quick_result):
     params, result = quick_result
     metrics = check_metrics(result.metrics)
     for key in REQUIRED:
@@ -43,11 +56,7 @@ def test_quick_run_has_every_key_and_is_within_tolerances(quick_result):
         for name in ([] if is_untestable(row) else rule_metrics(row)):
             assert name in metrics, (key, name)
     assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
-    tol = read_toml(DATA_DIR / "rbpf-parameter-estimation" / "tolerances.toml")["quick"]
-    for key, band in tol.items():
-        if key.startswith("mc_"):           # the notebook's Monte Carlo sweep adds these
-            continue
-        assert band["min"] <= metrics[key] <= band["max"], (key, metrics[key], band)
+    assert metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"] == params["paper_records"]
     ts = result.timeseries
     assert list(ts.columns[:6]) == ["t_s"] + [f"{p}_norm" for p in PARAMS]
     assert len(ts) == params["n_steps"] and math.isclose(ts.t_s.iloc[0], params["dt_s"])
@@ -84,10 +93,11 @@ def test_monte_carlo_records_are_consecutive_seeds(quick_result):
     assert [run.seed for run in result.lateral.runs] == list(
         range(params["seed"], params["seed"] + params["n_records"]))
     assert len(result.lateral.runs) == \
-        params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"]
+        params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_working_scheme_n"]
+    assert len(result.lateral.paper_only_norm) == params["paper_records"] - params["n_records"]
     assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
     assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
-    for name in ("toy_seeds", "n_records"):
+    for name in ("toy_seeds", "n_records", "paper_records"):
         with pytest.raises(ParameterError, match="< 1000"):
             chapter.run(quick=True, **chapter.SPEC.resolve({name: 1000}, quick=True))
 
@@ -313,3 +323,28 @@ def test_lateral_posterior_metrics_count_by_hand(quick_result):
     for j, name in enumerate(PARAMS):
         assert m[f"posterior_sd_rel_350_{name}"] == runs[0].posterior.sd[349, j]
         assert m[f"posterior_sd_rel_350_median_{name}"] == pytest.approx(np.median(sd350[:, j]))
+
+
+def test_paper_scheme_runs_on_paper_records_and_its_metrics_read_all_of_them(quick_result):
+    """Records n_records … paper_records − 1 get the paper scheme alone: each equals the paper
+    scheme run on its own on a freshly simulated record, and the paper scheme's rate reads all
+    paper_records records (hand count), the working scheme's n_records."""
+    from railpaper.settling import holds_from
+    from railpaper.threads import one_thread
+
+    params, result = quick_result
+    part, m = result.lateral, result.metrics
+    extra = params["paper_records"] - params["n_records"]
+    assert extra > 0 and part.paper_only_norm.shape == (extra, params["n_steps"], 5)
+    fixed, theta = study.vehicle()
+    seed = params["seed"] + params["paper_records"] - 1                 # the last one
+    with one_thread():
+        record = study.lateral_record(params, fixed, theta, seed)
+        alone = study.run_lateral_rbpf(params, fixed, theta, record, seed, "paper")
+    np.testing.assert_array_equal(part.paper_only_norm[-1], alone)
+    everyone = part.paper_scheme_norm()
+    np.testing.assert_array_equal(everyone[:params["n_records"]], part.stack("rbpf_paper_norm"))
+    hand = sum(bool(holds_from(np.abs(r - 1.0) <= 0.05, 350).all()) for r in everyone)
+    assert m["lateral_within_5pct_from_350_rate_paper_scheme_n"] == params["paper_records"]
+    assert m["lateral_within_5pct_from_350_rate_paper_scheme"] == hand / params["paper_records"]
+    assert m["lateral_within_5pct_from_350_rate_working_scheme_n"] == params["n_records"]
