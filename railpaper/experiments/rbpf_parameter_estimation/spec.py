@@ -14,7 +14,7 @@ SPEC = ChapterSpec(
     title="RBPF versus EKF for suspension parameters of a high-speed train (Ding et al. 2014)",
     paper="003_106973ea68498aa8.txt",
     notebook="rbpf_parameter_estimation.ipynb",
-    quick_sizes="toy as full (40 records x 500 steps, 300 particles, IBIS 1000); lateral: 5 "
+    quick_sizes="toy: 40 records (full: 90) x 500 steps, 300 particles, IBIS 1000; lateral: 5 "
                 "records (full: 30, and the paper scheme alone on 80 more) x 500 steps, 200 "
                 "particles, both schemes, one EKF guess each, IBIS on 5 (full: 30) with 100 "
                 "(250) particles; model error: 5 (20) records",
@@ -29,8 +29,8 @@ SPEC = ChapterSpec(
         P("toy_noise_var", 0.1, "float", "variance of W and V in Eq. (18), 1", positive=True),
         P("toy_steps", 500, "int", "measurements of each toy record", minimum=10),
         P("toy_particles", 300, "int", "RBPF particles (toy)", minimum=2),
-        P("toy_seeds", 40, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
-          minimum=1),
+        P("toy_seeds", 90, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
+          quick=40, minimum=1),
         P("toy_prior_halfwidth", 2.0, "float",
           "RBPF prior: uniform on initial condition +- this, per parameter, 1", positive=True),
         P("toy_tempering_steps", 50, "int", "toy working-scheme RBPF: tempering steps",
