@@ -149,7 +149,9 @@ def cmd_bands(args) -> int:
 
 def cmd_build(args) -> int:
     from railpaper.pipeline.book import build_book
-    html = build_book(args.quick, args.book_dir, progress=sys.stderr.isatty())
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    html = build_book(args.quick, args.book_dir, progress=sys.stderr.isatty(), jobs=args.jobs)
     print(f"railpaper: book built at {html / 'index.html'}")
     return 0
 
@@ -252,10 +254,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("build", help="run every chapter, then build the book strictly")
     p.add_argument("--quick", action="store_true")
     p.add_argument("--book-dir", type=Path, help=argparse.SUPPRESS)
+    p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
+                   help="chapters run at once, one core each (default: 2, or 1 on one core)")
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("bench", help="RBPF engine benchmark on paper 003's lateral model")
-    p.add_argument("--quick", action="store_true", help="fewer steps, same N (about a minute)")
+    p.add_argument("--quick", action="store_true", help="fewer steps and alternations, same N (about 2 minutes)")
     p.add_argument("--out", type=Path, help="write the results as JSON (and a PNG plot beside)")
     p.set_defaults(func=cmd_bench)
 

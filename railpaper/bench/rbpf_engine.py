@@ -9,7 +9,7 @@ Every number is measured in this process on the same simulated record (the chapt
 * ``filterpy``: :class:`railpaper.bench.filterpy_rbpf.FilterpyRBPF`, one filterpy filter per particle.
 
 How it is measured (:mod:`railpaper.timing`): filters that are compared are timed interleaved,
-A B C A B C …, :data:`REPEATS` alternations, each a fresh filter on the same steps with the same
+A B C A B C …, :data:`REPEATS` alternations (:data:`QUICK_REPEATS` at quick sizes), each a fresh filter on the same steps with the same
 seed; a rate is the median over the alternations with its min–max spread, a ratio the median of
 the per-alternation ratios with theirs.  The 1-minute load average is sampled before, between
 the blocks and after; :mod:`railpaper.bench.report` prints no ratio from a run whose load
@@ -41,7 +41,8 @@ from railpaper.experiments.rbpf_parameter_estimation.posterior import MIN_MOVES,
 from railpaper.models import lateral_16state as L
 from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 
-REPEATS = 5                    # alternations of every interleaved comparison
+REPEATS = 5                    # alternations of every interleaved comparison (full sizes)
+QUICK_REPEATS = 3              # at quick sizes: the book's Performance page, within its budget
 FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
 MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
 
@@ -254,7 +255,7 @@ def _row(kind: str, engine: str, N: int, steps: int, seconds: list[float], **ext
                 repeats=len(seconds), us_per_particle_step=1e6 / s["median"] / N, **extra)
 
 
-def main_payload(quick: bool, progress=print, repeats: int = REPEATS, smoke: bool = False
+def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke: bool = False
                  ) -> dict:
     """Run the whole benchmark; returns the JSON payload (see railpaper.bench.report).
 
@@ -264,6 +265,7 @@ def main_payload(quick: bool, progress=print, repeats: int = REPEATS, smoke: boo
     loads = LoadLog()
     if smoke:
         quick, repeats = True, 2
+    repeats = repeats or (QUICK_REPEATS if quick else REPEATS)
     sizes = (dict(working=40, paper=10, fp_working=6, fp_paper=2) if smoke else
              dict(working=200 if quick else 1000, paper=40 if quick else 200,
                   fp_working=30 if quick else 150, fp_paper=6 if quick else 25))

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from railpaper.bench.report import write_performance
 from railpaper.paths import BOOK_DIR, REPO_DIR
+from railpaper.pipeline.chapter_process import run_chapters
 from railpaper.pipeline.chapters import (
     PipelineError,
     book_chapters,
@@ -66,13 +67,15 @@ def write_environment(book_dir: Path, lock_path: Path = REPO_DIR / "environment.
 
 
 def build_book(quick: bool = False, book_dir: str | Path | None = None,
-               progress: bool = True, smoke_bench: bool = False) -> Path:
+               progress: bool = True, smoke_bench: bool = False, jobs: int = 1) -> Path:
     """Run every chapter into ``book_dir/chapters`` and build the HTML book strictly.
 
     ``book_dir`` defaults to the repository's ``book/``; another directory gets a copy of the
     book sources first (the tests build into a temporary directory).  ``smoke_bench``: the
     Performance page from the smoke-sized bench (the test suite, which tests the page's
-    structure, not its numbers).
+    structure, not its numbers).  ``jobs``: chapters run at once, each in its own process on
+    one core (:mod:`railpaper.pipeline.chapter_process`; same metrics, bit for bit); the bench
+    runs after them, alone, as it needs a quiet machine.
 
     Returns
     -------
@@ -86,7 +89,9 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
     if not (book / MATHJAX_SCRIPT).exists():
         raise PipelineError(f"MathJax is not installed at {book / MATHJAX_SCRIPT}; run `make venv`")
     chapters = book_chapters()
-    for name in chapters:
+    if jobs > 1:
+        run_chapters(chapters, quick, {name: book / "chapters" / name for name in chapters}, jobs)
+    for name in chapters if jobs <= 1 else ():
         print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}", file=sys.stderr)
         run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
     write_ledger(book, chapters)

@@ -183,7 +183,7 @@ def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     monkeypatch.setattr(engine, "time_ibis", lambda prob, N, n: (2e-2, 12, 9 * n * N))
     monkeypatch.setattr(engine, "step_budget", lambda prob, prof, N: dict(N=N))
     out = engine.main_payload(True, progress=lambda m: None)
-    assert OLD_KEYS | NEW_KEYS <= set(out) and out["repeats"] >= 5
+    assert OLD_KEYS | NEW_KEYS <= set(out) and out["repeats"] == engine.QUICK_REPEATS >= 3
     assert out["resamplings_first1000"] == 183
     at_100 = [k for k, N in calls[2:] if N == 100]
     assert at_100 == ["rbpf-working", "rbpf-paper", "qgrbpf"] * out["repeats"]
