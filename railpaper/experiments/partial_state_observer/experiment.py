@@ -42,6 +42,7 @@ from railpaper.experiments.partial_state_observer.result import (
 from railpaper.experiments.track_shaping import shaping_filter
 from railpaper.models import vertical_10dof as v10
 from railpaper.settling import settling_time_s
+from railpaper.threads import one_thread
 
 MEASUREMENT = evidence.MEASUREMENT
 existence_table, rank_claims, ranks = evidence.existence_table, evidence.rank_claims, evidence.ranks
@@ -314,8 +315,16 @@ def run(*, quick: bool = False, progress=None, **params) -> PartialStateObserver
     """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`.
 
     Every seed runs every speed under both readings of Table 1 (same track, same noise
-    draws); the selected reading's seed ``seed`` is the single record the figures show.
+    draws); the selected reading's seed ``seed`` is the single record the figures show.  Runs
+    on one numba and one OpenBLAS thread (:func:`railpaper.threads.one_thread`): with two
+    OpenBLAS threads 28 of the Kalman baseline's quick metrics differed from one thread's in
+    their last bits, so the metrics depended on the machine's thread count.
     """
+    with one_thread():
+        return _run(params, progress)
+
+
+def _run(params: dict, progress) -> PartialStateObserverResult:
     p = params
     validate(p)
     progress = progress or default_progress()
