@@ -91,9 +91,11 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
     chapters = book_chapters()
     if jobs > 1:
         run_chapters(chapters, quick, {name: book / "chapters" / name for name in chapters}, jobs)
-    for name in chapters if jobs <= 1 else ():
-        print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}", file=sys.stderr)
-        run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
+    else:
+        for name in chapters:
+            print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}",
+                  file=sys.stderr)
+            run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
     write_ledger(book, chapters)
     write_environment(book)
     if (book / "performance.md").exists():

@@ -243,7 +243,7 @@ def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
     runs, ekf_first, crlb, ekf_count = [], [], None, None
     spent = {"working": 0.0, "paper": 0.0, "ibis": 0.0}
     for i in range(p["n_records"]):
-        progress(0.1 + 0.8 * i / p["n_records"], f"lateral record {i}")
+        progress(0.1 + 0.6 * i / p["n_records"], f"lateral record {i}")
         seed = p["seed"] + i
         rec = first if user else lateral_record(p, fixed, theta, seed)
         system, fr = filter_system(p, fixed, theta, rec), {}
@@ -281,8 +281,8 @@ def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
     paper_only = []                          # records n_records … paper_records - 1
     if not user:
         for i in range(p["n_records"], p["paper_records"]):      # none if paper_records <= n
-            progress(0.9 + 0.05 * (i - p["n_records"]) / (p["paper_records"] - p["n_records"]),
-                     f"lateral record {i}, paper scheme")
+            progress(0.7 + 0.2 * (i - p["n_records"]) / (p["paper_records"] - p["n_records"]),
+                     f"lateral record {i}, paper scheme alone")
             seed = p["seed"] + i
             rec = lateral_record(p, fixed, theta, seed)
             t0 = time.perf_counter()
