@@ -259,7 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("bench", help="RBPF engine benchmark on paper 003's lateral model")
-    p.add_argument("--quick", action="store_true", help="fewer steps and alternations, same N (about 2 minutes)")
+    p.add_argument("--quick", action="store_true",
+                   help="fewer steps and alternations, same N (about 2 minutes)")
     p.add_argument("--out", type=Path, help="write the results as JSON (and a PNG plot beside)")
     p.set_defaults(func=cmd_bench)
 

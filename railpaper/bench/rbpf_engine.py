@@ -9,8 +9,8 @@ Every number is measured in this process on the same simulated record (the chapt
 * ``filterpy``: :class:`railpaper.bench.filterpy_rbpf.FilterpyRBPF`, one filterpy filter per particle.
 
 How it is measured (:mod:`railpaper.timing`): filters that are compared are timed interleaved,
-A B C A B C …, :data:`REPEATS` alternations (:data:`QUICK_REPEATS` at quick sizes), each a fresh filter on the same steps with the same
-seed; a rate is the median over the alternations with its min–max spread, a ratio the median of
+A B C A B C …, :data:`REPEATS` alternations (:data:`QUICK_REPEATS` at quick sizes), each a fresh
+filter on the same steps with the same seed; a rate is the median over the alternations with its min–max spread, a ratio the median of
 the per-alternation ratios with theirs.  The 1-minute load average is sampled before, between
 the blocks and after; :mod:`railpaper.bench.report` prints no ratio from a run whose load
 exceeded the core count.  The estimates of the baselines are compared with ours
@@ -368,7 +368,8 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
         resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
-        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke, sizes=sizes, repeats=repeats,
+        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke,
+        sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
         setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],
                    speed_kmh=p["speed_kmh"], ess_fraction=p["ess_fraction"],

@@ -99,7 +99,8 @@ def refloor(chapter: str, quick: bool) -> dict[str, tuple[float, float, str]]:
             out[metric] = (lo, hi, source)
             continue
         pad = rounding_floor([lo, hi])
-        low, high, note = _capped(lo, hi, min(lo, (lo + hi) / 2 - pad), max(hi, (lo + hi) / 2 + pad),
+        mid = (lo + hi) / 2
+        low, high, note = _capped(lo, hi, min(lo, mid - pad), max(hi, mid + pad),
                                   thresholds.get(metric, []))
         if (low, high) != (lo, hi) and FLOOR_NOTE not in source:
             source += f"; {FLOOR_NOTE}" + (f" ({note})" if note else "")

@@ -41,7 +41,8 @@ def quick_result():
 def test_quick_book_run_is_within_tolerances(quick_chapter_dir):
     from railpaper.pipeline.check import check_chapter
 
-    rows = check_chapter("rbpf-parameter-estimation", quick_chapter_dir("rbpf-parameter-estimation"))
+    chapter_dir = quick_chapter_dir("rbpf-parameter-estimation")
+    rows = check_chapter("rbpf-parameter-estimation", chapter_dir)
     assert rows and all(r.status == "ok" for r in rows), [
         (r.metric, r.value, r.band) for r in rows if r.status != "ok"]
 
