@@ -185,6 +185,24 @@ def _quiet_worker_logs() -> None:
     logging.getLogger("distributed").setLevel(logging.ERROR)
 
 
+def _close_quietly(client, cluster) -> None:
+    """Close the client and our LocalCluster with only errors of dask's loggers in this process:
+    after an interrupt a worker busy with a cancelled sample takes its nanny (here) more than 4 s
+    to stop, and the nanny's 'still alive after 4.0 seconds, killing' warning is that
+    cancellation's noise, like the workers' warnings :func:`_quiet_worker_logs` silences."""
+    import logging
+    dask_log = logging.getLogger("distributed")
+    level = dask_log.level
+    dask_log.setLevel(logging.ERROR)
+    try:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        dask_log.setLevel(level)
+
+
 class _Progress:
     """``railpaper: sweep 12/50 done, 1 failed, ETA 1m05s`` on stderr, at most once a second.
 
@@ -314,10 +332,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
             write_csv_atomic(pd.DataFrame(rows), out / "results.csv")
             meter.update(outcome["status"])
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        _close_quietly(client, cluster)
     order = {key: i for i, (key, _, _) in enumerate(samples)}
     everything = pd.DataFrame(rows)                          # this sweep's rows in grid order first
     everything = everything.iloc[np.argsort(everything["sample"].map(order).fillna(len(order))
