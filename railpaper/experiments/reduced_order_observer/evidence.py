@@ -5,7 +5,7 @@ Two kinds, both turned into metrics that ``data/reduced-order-observer/claims.to
 * **Monte Carlo** (:func:`monte_carlo`): the chapter's simulation for ``mc_seeds`` seeds
   (``seed``, ``seed + 1``, …; each seed a new track profile and new sensor noise) at every speed
   of the chapter, under BOTH readings of the paper's P0 (:data:`READINGS`).  All samples run as
-  one batch (time loop over arrays of samples), so 20 seeds × 9 speeds × 2 readings take seconds.
+  one batch (time loop over arrays of samples): 200 seeds × 9 speeds × 2 readings take ≈ 30 s.
   A sample of seed ``s`` at speed ``v`` uses the same profile and noise draws as the chapter's
   single run with ``seed = s``, so seed ``seed`` reproduces the single-run metrics.
   Per-seed values are summarised with :mod:`railpaper.stats`: medians with order-statistic
