@@ -25,6 +25,8 @@ grid; ``run_ibis`` the exact posterior of any θ by IBIS; ``run_qgrbpf`` paper 0
 quasi-Gaussian RBPF; ``change_likelihoods`` and ``change_posterior`` the exact posterior of an
 abrupt parameter change (when, and to which value).  The parts: :mod:`~railpaper.engine.kalman` (the numpy reference step,
 Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank of N filters),
+:mod:`~railpaper.engine.affine_pass` (the RBPF and Q-GRBPF over a whole record in one compiled
+pass, for models affine in θ such as both toys),
 :mod:`~railpaper.engine.batch_expm` and :mod:`~railpaper.engine.sparse_zoh` (exact ZOH of stacks
 of models), :mod:`~railpaper.engine.particles` (weights, resampling, Liu–West),
 :mod:`~railpaper.engine.mcmc` (adaptive Metropolis on the Kalman likelihood) and
@@ -38,16 +40,18 @@ from railpaper.engine.grid_posterior import GridPosterior, grid_posterior
 from railpaper.engine.ibis import IBISRun, run_ibis
 from railpaper.engine.kalman import predict, update
 from railpaper.engine.kalman_bank import kalman_run, kalman_step
-from railpaper.engine.linear_gaussian import LinearGaussianBatch, LinearGaussianSystem
+from railpaper.engine.linear_gaussian import (AffineSystem, LinearGaussianBatch,
+                                              LinearGaussianSystem)
 from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
 from railpaper.engine.particles import liu_west_move, normalise_log_weights, systematic_resample
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
 from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, run_filter,
                                    run_rbpf)
 
-__all__ = ["ChangeLikelihoods", "ChangePosterior", "FilterRun", "GridPosterior", "IBISRun", "LinearGaussianBatch",
-           "LinearGaussianSystem", "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate",
-           "adaptive_metropolis", "change_likelihoods", "change_posterior", "crlb_std", "fisher_information", "grid_posterior",
+__all__ = ["AffineSystem", "ChangeLikelihoods", "ChangePosterior", "FilterRun", "GridPosterior",
+           "IBISRun", "LinearGaussianBatch", "LinearGaussianSystem", "QuasiGaussianRBPF",
+           "RaoBlackwellisedPF", "StepEstimate", "adaptive_metropolis", "change_likelihoods",
+           "change_posterior", "crlb_std", "fisher_information", "grid_posterior",
            "kalman_log_posterior", "kalman_run", "kalman_step", "liu_west_move",
-           "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf",
-           "run_rbpf", "systematic_resample", "update"]
+           "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf",
+           "systematic_resample", "update"]

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from railpaper.engine.kalman_bank import kalman_run
-from railpaper.engine.particles import normalise_log_weights, weighted_mean_cov
+from railpaper.engine.particles import normalise_log_weights
 
 
 def box_grid(lower, upper, n_points: int) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -95,26 +96,59 @@ class GridPosterior:
     edge_mass: float
 
 
+@numba.njit(cache=True)
+def _step_summaries(loglik, points, mean, std):  # pragma: no cover - compiled
+    """Posterior mean and std (K, d) after every step from the per-step log-likelihoods
+    (K, G) of the grid points (G, d): cumulative log-likelihood, log-sum-exp weights, weighted
+    mean and variance (clipped at 0).  Returns the final cumulative log-likelihood (G,)."""
+    K, G = loglik.shape
+    d = points.shape[1]
+    cumulative, w = np.zeros(G), np.empty(G)
+    for k in range(K):
+        top = -np.inf
+        for g in range(G):
+            cumulative[g] += loglik[k, g]
+            if cumulative[g] > top:
+                top = cumulative[g]
+        total = 0.0
+        for g in range(G):                            # as normalise_log_weights: all −inf
+            if top == np.inf:                         # -> uniform, some +inf -> those alone
+                w[g] = 1.0 if cumulative[g] == np.inf else 0.0
+            elif top == -np.inf:
+                w[g] = 1.0
+            else:
+                w[g] = np.exp(cumulative[g] - top)
+            total += w[g]
+        for j in range(d):
+            acc = 0.0
+            for g in range(G):
+                acc += w[g] * points[g, j]
+            mean[k, j] = acc / total
+        for j in range(d):
+            acc = 0.0
+            for g in range(G):
+                c = points[g, j] - mean[k, j]
+                acc += w[g] * c * c
+            std[k, j] = np.sqrt(max(acc / total, 0.0))
+    return cumulative
+
+
 def grid_posterior(system, y: np.ndarray, lower, upper, n_points: int, x0, P0,
                    u: np.ndarray | None = None) -> GridPosterior:
     """Exact posterior of θ under a uniform prior on the box [lower, upper], after every step."""
     points, axes = box_grid(lower, upper, n_points)
     d = points.shape[1]
-    cumulative = np.zeros(points.shape[0])
-    means, stds = [], []
-    for loglik in _loglik_steps(system, np.asarray(y, float), points, x0, P0, u):
-        cumulative += loglik
-        w, _, _ = normalise_log_weights(cumulative)
-        mean, cov = weighted_mean_cov(points, w)
-        means.append(mean)
-        stds.append(np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+    loglik = np.ascontiguousarray(_loglik_steps(system, np.asarray(y, float), points, x0, P0, u))
+    means, stds = np.empty((len(loglik), d)), np.empty((len(loglik), d))
+    cumulative = _step_summaries(np.where(np.isnan(loglik), -np.inf, loglik), points, means,
+                                 stds)
     w, log_norm, _ = normalise_log_weights(cumulative)
     shape = (n_points,) * d
     grid_w = w.reshape(shape)
     interior = grid_w[(slice(1, -1),) * d].sum() if n_points > 2 else 0.0
     spacing = np.array([ax[1] - ax[0] if len(ax) > 1 else np.inf for ax in axes])
-    std = np.array(stds)
-    return GridPosterior(mean=np.array(means), std=std, axes=axes,
+    std = stds
+    return GridPosterior(mean=means, std=std, axes=axes,
                          log_posterior=(cumulative - log_norm).reshape(shape), spacing=spacing,
                          min_std_over_spacing=float(np.min(std / spacing)),
                          edge_mass=float(1.0 - interior))

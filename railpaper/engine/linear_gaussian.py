@@ -92,3 +92,53 @@ class LinearGaussianSystem(Protocol):
     """
 
     def __call__(self, theta: np.ndarray) -> LinearGaussianBatch: ...
+
+
+class AffineSystem:
+    """A :class:`LinearGaussianSystem` whose transition and input matrices are affine in θ::
+
+        F(θ) = F0 + Σ_j θ_j F_j,    B(θ) = B0 + Σ_j θ_j B_j,    Q, H, R shared.
+
+    Both toys are of this form (paper 004: F = [[0, 1], [a, b]]; paper 003's Eq. (18):
+    F = [[0, 1.5], [x1, x2]], B = [x3, x4]ᵀ), so a compiled filter can form a particle's
+    matrices from θ where it uses them (:mod:`railpaper.engine.affine_pass`) instead of
+    receiving them.  Calling it gives the same :class:`LinearGaussianBatch` as any model.
+
+    Attributes
+    ----------
+    F0 : ndarray, (n, n);  F_theta : ndarray, (d, n, n)
+    Q : ndarray, (n, n);  H : ndarray, (p, n);  R : ndarray, (p, p)
+    B0 : ndarray, (n, m) or None;  B_theta : ndarray, (d, n, m) or None
+    """
+
+    def __init__(self, F0, F_theta, Q, H, R, B0=None, B_theta=None):
+        self.F0, self.F_theta = np.asarray(F0, float), np.asarray(F_theta, float)
+        self.Q, self.H, self.R = (np.asarray(M, float) for M in (Q, H, R))
+        self.B0 = None if B0 is None else np.asarray(B0, float)
+        self.B_theta = None if B_theta is None else np.asarray(B_theta, float)
+        d, n = self.F_theta.shape[0], self.F0.shape[0]
+        if self.F_theta.shape != (d, n, n) or (self.B0 is None) != (self.B_theta is None):
+            raise ValueError("AffineSystem: F_theta must be (d, n, n), and B0 and B_theta "
+                             "given together")
+
+    @property
+    def n_params(self) -> int:
+        """d, the length of θ."""
+        return self.F_theta.shape[0]
+
+    def __call__(self, theta: np.ndarray) -> LinearGaussianBatch:
+        theta = np.atleast_2d(np.asarray(theta, float))
+        F = _affine(self.F0, self.F_theta, theta)                       # F0 + Σ θ_j F_j
+        B = None if self.B0 is None else _affine(self.B0, self.B_theta, theta)
+        return LinearGaussianBatch(F, self.Q, self.H, self.R, B)
+
+
+def _affine(M0: np.ndarray, M_theta: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``M0 + Σ_j θ_j M_j`` per row of θ, summing only the non-zero coefficients (a constant
+    entry stays exact even where θ is infinite)."""
+    M = np.repeat(M0[None], theta.shape[0], axis=0)
+    for j in range(M_theta.shape[0]):
+        nonzero = M_theta[j] != 0
+        if nonzero.any():
+            M[:, nonzero] += theta[:, j, None] * M_theta[j][nonzero]
+    return M

@@ -44,6 +44,7 @@ from typing import Callable
 
 import numpy as np
 
+from railpaper.engine import affine_pass
 from railpaper.engine.kalman import predict, update
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.particles import (
@@ -152,6 +153,25 @@ class QuasiGaussianRBPF:
                             x_mean=x_mean, x_std=x_std, ess=ess,
                             degenerate=bool(degenerate or flat),
                             log_evidence=log_norm - np.log(n_particles), resampled=self.search)
+
+
+    def run_record(self, Y: np.ndarray, U: np.ndarray | None = None) -> FilterRun | None:
+        """Every row of ``Y`` in one compiled pass (:mod:`railpaper.engine.affine_pass`) when
+        the model is an :class:`~railpaper.engine.linear_gaussian.AffineSystem` and the engine
+        compiled: the same draws and, to rounding, the same estimates as :meth:`step` row by
+        row.  None (nothing done) otherwise."""
+        if not affine_pass.applies(self.system, self.engine):
+            return None
+        (mean, std, x_mean, x_std, ess, degenerate, log_evidence), (theta, x, P, q) = \
+            affine_pass.qgrbpf_pass(self.system, self.theta, self.x, self.P, Y, U, self.rng,
+                                    printed=self.weighting == "printed",
+                                    threshold=self.weight_threshold, search=self.search)
+        with np.errstate(divide="ignore"):
+            self.log_w = np.log(q)
+        self.theta, self.x, self.P, self.sys = theta, x, P, self.system(theta)
+        return FilterRun(theta_mean=mean, theta_std=std, x_mean=x_mean, x_std=x_std, ess=ess,
+                         resampled=np.full(len(mean), self.search), degenerate=degenerate,
+                         log_evidence=log_evidence, theta=theta.copy(), weights=q.copy())
 
 
 def run_qgrbpf(system, y, theta0, x0, P0, rng, *, u=None, **options) -> FilterRun:

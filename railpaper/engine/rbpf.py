@@ -34,12 +34,14 @@ from typing import Callable
 
 import numpy as np
 
+from railpaper.engine import affine_pass
 from railpaper.engine.kalman import predict, update
 from railpaper.engine.kalman_bank import kalman_run, kalman_step
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.particles import (
     effective_sample_size,
     liu_west_move,
+    liu_west_shrinkage,
     normalise_log_weights,
     systematic_resample,
     weighted_mean_cov,
@@ -292,6 +294,30 @@ class RaoBlackwellisedPF:
             k0 += j + 1
         return outputs
 
+    def run_record(self, Y: np.ndarray, U: np.ndarray | None = None) -> FilterRun | None:
+        """Every row of ``Y`` in one compiled pass (:mod:`railpaper.engine.affine_pass`) when
+        the model is an :class:`~railpaper.engine.linear_gaussian.AffineSystem`, the engine
+        compiled and the move on: the same draws and, to rounding, the same estimates as
+        :meth:`step` row by row.  None (nothing done) otherwise."""
+        if not (affine_pass.applies(self.system, self.engine) and self.move):
+            return None
+        x, P = self.x, self.P
+        if self.ancestors is not None:                   # a pending resampling's copy
+            x, P = x[self.ancestors], P[self.ancestors]
+        a, h2 = liu_west_shrinkage(self.delta)
+        (mean, std, x_mean, x_std, ess, degenerate, log_evidence, resampled), \
+            (theta, x, P, log_w) = affine_pass.rbpf_pass(
+                self.system, self.theta, x, P, self.log_w, self.k, Y, U, self.rng,
+                paper=self.scheme == "paper", a=a, h2=h2, ess_fraction=self.ess_fraction,
+                tempering_steps=self.tempering_steps, offset=self.offset, scale=self.scale,
+                log_mask=self.log_mask)
+        self.k += len(mean)
+        self.theta, self.x, self.P, self.log_w = theta, x, P, log_w
+        self.sys, self.ancestors = self.system(theta), None
+        return FilterRun(theta_mean=mean, theta_std=std, x_mean=x_mean, x_std=x_std, ess=ess,
+                         resampled=resampled, degenerate=degenerate,
+                         log_evidence=log_evidence, theta=theta.copy(), weights=np.exp(log_w))
+
     def _weigh(self, loglik: np.ndarray, x: np.ndarray | None = None,
                var: np.ndarray | None = None) -> tuple[StepEstimate, np.ndarray]:
         """Weights, estimates and the resampling decision of step k from its log-likelihoods
@@ -348,8 +374,13 @@ def stack_steps(outputs: list[StepEstimate], theta: np.ndarray, weights: np.ndar
 
 
 def run_filter(filt, y: np.ndarray, u: np.ndarray | None = None) -> FilterRun:
-    """Run a stateful parameter filter (RBPF or Q-GRBPF) over measurements y (K, p)."""
+    """Run a stateful parameter filter (RBPF or Q-GRBPF) over measurements y (K, p): in one
+    compiled pass where the filter's ``run_record`` can, else step by step."""
     y = np.asarray(y, float)
+    whole = getattr(filt, "run_record", None)
+    run = None if whole is None else whole(y, u)
+    if run is not None:
+        return run
     if hasattr(filt, "steps"):
         outputs = filt.steps(y, u)
     else:

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from railpaper.discretise import propagate
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine.linear_gaussian import AffineSystem, LinearGaussianBatch
 
 PAPER004_G = np.array([[-1.0, 0.38], [-1.5, 1.0]])
 PAPER004_H = np.array([[1.0, -0.38], [0.5, 0.7]])
@@ -45,34 +45,22 @@ def paper004_system(q_var: float, r_var: float) -> SystemBuilder:
     """
     Q = PAPER004_G @ (q_var * np.eye(2)) @ PAPER004_G.T
     R = r_var * np.eye(2)
-
-    def system(theta: np.ndarray) -> LinearGaussianBatch:
-        theta = np.atleast_2d(theta)
-        F = np.zeros((theta.shape[0], 2, 2))
-        F[:, 0, 1] = 1.0
-        F[:, 1, 0] = theta[:, 0]
-        F[:, 1, 1] = theta[:, 1]
-        return LinearGaussianBatch(F, Q, PAPER004_H, R)
-
-    return system
+    F0, F_theta = np.zeros((2, 2)), np.zeros((2, 2, 2))
+    F0[0, 1] = 1.0
+    F_theta[0, 1, 0] = F_theta[1, 1, 1] = 1.0                 # F[1] = (a, b)
+    return AffineSystem(F0, F_theta, Q, PAPER004_H, R)
 
 
 def eq18_system(w_var: float, v_var: float) -> SystemBuilder:
     """``system(theta)`` for paper 003's Eq. (18): theta (N, 4) = (x1, x2, x3, x4)."""
     Q = w_var * EQ18_G @ EQ18_G.T
     R = np.array([[v_var]])
-
-    def system(theta: np.ndarray) -> LinearGaussianBatch:
-        theta = np.atleast_2d(theta)
-        n = theta.shape[0]
-        F = np.zeros((n, 2, 2))
-        F[:, 0, 1] = 1.5
-        F[:, 1, 0] = theta[:, 0]
-        F[:, 1, 1] = theta[:, 1]
-        B = theta[:, 2:4, None].copy()
-        return LinearGaussianBatch(F, Q, EQ18_H, R, B)
-
-    return system
+    F0, F_theta = np.zeros((2, 2)), np.zeros((4, 2, 2))
+    F0[0, 1] = 1.5
+    F_theta[0, 1, 0] = F_theta[1, 1, 1] = 1.0                 # F[1] = (x1, x2)
+    B_theta = np.zeros((4, 2, 1))
+    B_theta[2, 0, 0] = B_theta[3, 1, 0] = 1.0                 # B = (x3, x4)ᵀ
+    return AffineSystem(F0, F_theta, Q, EQ18_H, R, np.zeros((2, 1)), B_theta)
 
 
 @dataclass
