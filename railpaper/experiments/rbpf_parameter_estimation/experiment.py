@@ -62,12 +62,13 @@ def validate(p: dict) -> None:
     if p["spectrum"] not in track.SPECTRA:
         raise ParameterError(f"parameter 'spectrum': unknown spectrum {p['spectrum']!r}; "
                              f"one of {', '.join(track.SPECTRA)}")
-    for name in ("toy_seeds", "n_records", "paper_records"):
+    for name in ("toy_seeds", "n_records", "paper_records", "working_records"):
         if p[name] >= 1000:
             raise ParameterError(f"parameter '{name}' must be < 1000 (seed batches 1000 apart are "
                                  f"disjoint), got {p[name]}")
-    if p["ess_fraction"] > 1:
-        raise ParameterError("ess_fraction must be <= 1")
+    for name in ("ess_fraction", "toy_ess_fraction"):
+        if p[name] > 1:
+            raise ParameterError(f"{name} must be <= 1")
     fixed, theta = lateral.vehicle()
     check_sample_time("dt_s", p["dt_s"], L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6),
                       f"the lateral model at {p['speed_kmh']:g} km/h")

@@ -93,7 +93,7 @@ def normalised_estimates(result, params):
     fig, axes = plt.subplots(2, 2, figsize=(7, 7), sharex=True, sharey="row")
     for col, scheme in enumerate(("working", "paper")):
         ax, ax_err = axes[0, col], axes[1, col]
-        stack = lateral.stack(f"rbpf_{scheme}_norm")                # (records, K, 5)
+        stack = getattr(lateral, f"{scheme}_scheme_norm")()       # every record, (R, K, 5)
         for j, name in enumerate(PARAM_NAMES):
             ax.plot(t, stack[0, :, j], color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
             ax.fill_between(t, stack[:, :, j].min(0), stack[:, :, j].max(0), color=f"C{j}",
@@ -139,7 +139,7 @@ def final_errors_over_records(result, params):
     fig, axes = plt.subplots(1, 2, figsize=(7, 3.8), sharey=True)
     for ax, (scheme, suffix) in zip(axes, (("paper", "_paper_scheme"),
                                            ("working", "_working_scheme"))):
-        finals = lateral.stack(f"rbpf_{scheme}_norm")[:, -1] - 1
+        finals = getattr(lateral, f"{scheme}_scheme_norm")()[:, -1] - 1   # every record
         for j, name in enumerate(PARAM_NAMES):
             ax.scatter(np.full(len(finals), j) + np.linspace(-0.2, 0.2, len(finals)),
                        finals[:, j], s=9, color=f"C{j}", alpha=0.7)

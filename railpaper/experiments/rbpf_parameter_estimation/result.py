@@ -253,6 +253,8 @@ class LateralPart:
         Normalised paper-scheme estimates θ̂/θ of the records after ``runs`` (seeds
         ``seed + n_records`` …), filtered by the paper scheme alone: its claims need more
         records than the other estimators (:meth:`paper_scheme_norm` joins them).
+    working_only_norm : ndarray, shape (working_records - n_records, K, 5)
+        The same for our working scheme (:meth:`working_scheme_norm`).
     """
 
     fixed: dict
@@ -263,12 +265,20 @@ class LateralPart:
     crlb: pd.DataFrame | None = None
     ekf_converged_count: int | None = None
     paper_only_norm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 5)))
+    working_only_norm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 5)))
 
     def paper_scheme_norm(self) -> np.ndarray:
         """The paper scheme's normalised estimates on every record, shape (paper_records, K,
         5): those of ``runs``, then ``paper_only_norm``."""
         first = self.stack("rbpf_paper_norm")
         return np.concatenate([first, self.paper_only_norm]) if len(self.paper_only_norm) \
+            else first
+
+    def working_scheme_norm(self) -> np.ndarray:
+        """Our working scheme's normalised estimates on every record, shape (working_records,
+        K, 5): those of ``runs``, then ``working_only_norm``."""
+        first = self.stack("rbpf_working_norm")
+        return np.concatenate([first, self.working_only_norm]) if len(self.working_only_norm) \
             else first
 
     @property

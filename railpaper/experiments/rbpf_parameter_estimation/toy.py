@@ -58,10 +58,10 @@ def rbpf(p: dict, model, sim: Simulation, theta0: np.ndarray, rng: np.random.Gen
     """The RBPF of ``model`` (from :func:`system`) from particles ``theta0`` on one record:
     ``scheme="paper"`` (Steps 1–2.6: resample and move every step, Liu–West δ =
     ``paper_delta``) or ``"working"`` (ours: tempering over ``toy_tempering_steps``, resampling
-    when ESS < ``ess_fraction`` N, δ = ``working_delta``).  Each particle's Kalman filter starts
+    when ESS < ``toy_ess_fraction`` N, δ = ``working_delta``).  Each particle's Kalman filter starts
     at x = 0 with covariance I."""
     options = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
-               dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
+               dict(scheme="working", delta=p["working_delta"], ess_fraction=p["toy_ess_fraction"],
                     tempering_steps=p["toy_tempering_steps"]))
     return run_rbpf(model, sim.y, theta0, np.zeros(2), np.eye(2), rng, u=sim.u, **options)
 

@@ -31,10 +31,10 @@ REQUIRED = (["steps_to_within_5pct_all", "steps_to_within_5pct_all_paper_scheme"
 def quick_result():
     """run() in this process at quick sizes with fewer records (the quick book's papermill run
     at the full quick sizes is what the tolerance test reads); paper_records > n_records, so
-    records filtered by the paper scheme alone are in it."""
+    records filtered by the paper scheme alone, and by the working scheme alone, are in it."""
     params = chapter.SPEC.resolve({"toy_seeds": 6, "n_records": 3, "ibis_records": 2,
-                                   "mismatch_records": 2}, quick=True)
-    assert params["paper_records"] > params["n_records"]
+                                   "mismatch_records": 2, "working_records": 4}, quick=True)
+    assert params["paper_records"] > params["working_records"] > params["n_records"]
     return params, chapter.run(quick=True, **params)
 
 
@@ -93,12 +93,12 @@ def test_monte_carlo_records_are_consecutive_seeds(quick_result):
     assert sorted(stats[stats.init == 1].seed) == seeds == sorted(stats[stats.init == 2].seed)
     assert [run.seed for run in result.lateral.runs] == list(
         range(params["seed"], params["seed"] + params["n_records"]))
-    assert len(result.lateral.runs) == \
-        params["n_records"] == result.metrics["lateral_within_5pct_from_350_rate_working_scheme_n"]
+    assert len(result.lateral.runs) == params["n_records"]
     assert len(result.lateral.paper_only_norm) == params["paper_records"] - params["n_records"]
+    assert len(result.lateral.working_only_norm) == params["working_records"] - params["n_records"]
     assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
     assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
-    for name in ("toy_seeds", "n_records", "paper_records"):
+    for name in ("toy_seeds", "n_records", "paper_records", "working_records"):
         with pytest.raises(ParameterError, match="< 1000"):
             chapter.run(quick=True, **chapter.SPEC.resolve({name: 1000}, quick=True))
 
@@ -326,26 +326,29 @@ def test_lateral_posterior_metrics_count_by_hand(quick_result):
         assert m[f"posterior_sd_rel_350_median_{name}"] == pytest.approx(np.median(sd350[:, j]))
 
 
-def test_paper_scheme_runs_on_paper_records_and_its_metrics_read_all_of_them(quick_result):
-    """Records n_records … paper_records − 1 get the paper scheme alone: each equals the paper
-    scheme run on its own on a freshly simulated record, and the paper scheme's rate reads all
-    paper_records records (hand count), the working scheme's n_records."""
+@pytest.mark.parametrize("scheme", ["paper", "working"])
+def test_each_scheme_runs_on_its_records_and_its_metrics_read_all_of_them(quick_result, scheme):
+    """Records n_records … <scheme>_records − 1 get that scheme alone: each equals the scheme
+    run on its own on a freshly simulated record, and the scheme's rate reads all its records
+    (hand count)."""
     from railpaper.settling import holds_from
     from railpaper.threads import one_thread
 
     params, result = quick_result
     part, m = result.lateral, result.metrics
-    extra = params["paper_records"] - params["n_records"]
-    assert extra > 0 and part.paper_only_norm.shape == (extra, params["n_steps"], 5)
+    alone_norm = getattr(part, f"{scheme}_only_norm")
+    n_total = params[f"{scheme}_records"]
+    extra = n_total - params["n_records"]
+    assert extra > 0 and alone_norm.shape == (extra, params["n_steps"], 5)
     fixed, theta = study.vehicle()
-    seed = params["seed"] + params["paper_records"] - 1                 # the last one
+    seed = params["seed"] + n_total - 1                                 # the last one
     with one_thread():
         record = study.lateral_record(params, fixed, theta, seed)
-        alone = study.run_lateral_rbpf(params, fixed, theta, record, seed, "paper")
-    np.testing.assert_array_equal(part.paper_only_norm[-1], alone)
-    everyone = part.paper_scheme_norm()
-    np.testing.assert_array_equal(everyone[:params["n_records"]], part.stack("rbpf_paper_norm"))
+        alone = study.run_lateral_rbpf(params, fixed, theta, record, seed, scheme)
+    np.testing.assert_array_equal(alone_norm[-1], alone)
+    everyone = getattr(part, f"{scheme}_scheme_norm")()
+    np.testing.assert_array_equal(everyone[:params["n_records"]],
+                                  part.stack(f"rbpf_{scheme}_norm"))
     hand = sum(bool(holds_from(np.abs(r - 1.0) <= 0.05, 350).all()) for r in everyone)
-    assert m["lateral_within_5pct_from_350_rate_paper_scheme_n"] == params["paper_records"]
-    assert m["lateral_within_5pct_from_350_rate_paper_scheme"] == hand / params["paper_records"]
-    assert m["lateral_within_5pct_from_350_rate_working_scheme_n"] == params["n_records"]
+    assert m[f"lateral_within_5pct_from_350_rate_{scheme}_scheme_n"] == n_total
+    assert m[f"lateral_within_5pct_from_350_rate_{scheme}_scheme"] == hand / n_total
