@@ -42,7 +42,7 @@ SPEC = ChapterSpec(
           "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
         P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
           quick=61, minimum=3),
-        P("n_monte_carlo", 100, "int", "records (seeds) of the Monte Carlo study", quick=50,
+        P("n_monte_carlo", 250, "int", "records (seeds) of the Monte Carlo study", quick=50,
           minimum=1),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
           "Monte Carlo records are record+1, record+2 and so on", minimum=0),
