@@ -32,7 +32,8 @@ import numpy as np
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.toy import gaussian_covers
-from railpaper.stats import rate
+from railpaper.stats import mean_interval, rate
+from railpaper.threads import one_thread
 
 #: (ess_fraction, tempering_steps); the first is the chapter's default (ESS < 0.5 N since
 #: 2026-12-04; 0.8 before).
@@ -92,7 +93,6 @@ def paired_rows(first_seed: int, n_records: int, thresholds=PAIRED_THRESHOLDS) -
     5 % from step 350 on, how many of the 5 parameters its 90 % interval (mean ± 1.645 sd)
     covers at the last step, the largest final |relative error|, the resamplings and the
     seconds of the run.  Chapter defaults otherwise, one thread."""
-    from railpaper.threads import one_thread
     base = dict(E.SPEC.resolve({}, False))
     fixed, theta = study.vehicle()
     rows = []
@@ -119,7 +119,6 @@ def paired_rows(first_seed: int, n_records: int, thresholds=PAIRED_THRESHOLDS) -
 def paired_summary(rows: list[dict], thresholds=PAIRED_THRESHOLDS) -> list[str]:
     """Lines: each threshold's rates, and the paired differences (second − first) with their
     95 % t intervals, for the within-5 % indicator and the coverage fraction."""
-    from railpaper.stats import mean_interval
     a, b = thresholds
     lines = []
     for name, scale in (("within", 1.0), ("covers", 5.0)):

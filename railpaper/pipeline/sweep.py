@@ -30,6 +30,7 @@ import pandas as pd
 
 from railpaper.experiments import load_chapter
 from railpaper.experiments.base import ChapterSpec, ParameterError, check_metrics
+from railpaper.pipeline.chapter_process import SWEEP_WORKERS_VARIABLE
 from railpaper.pipeline.chapters import PipelineError, chapter_spec
 from railpaper.pipeline.sweep_table import (RESERVED_COLUMNS, load_results, sample_key,
                                             summarise, write_csv_atomic)
@@ -349,6 +350,9 @@ def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
                    workers: int | None = None) -> pd.DataFrame:
     """A chapter notebook's Monte Carlo samples as a fresh sweep, without progress lines.
 
+    ``workers`` defaults to the environment's ``RAILPAPER_SWEEP_WORKERS`` (set to 1 by
+    :mod:`railpaper.pipeline.chapter_process` when chapters run side by side), else one per core.
+
     Every sample is ``params`` (the chapter's resolved parameters; its seed is ignored) with one
     of ``seeds`` and one combination of ``grid`` values.  ``out_dir`` is emptied first: its
     samples belong to this run's parameters.
@@ -360,6 +364,8 @@ def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
     """
     grid = dict(grid or {})
     fixed = {k: v for k, v in params.items() if k not in grid and k != SEED_PARAMETER}
+    if workers is None:         # a chapter of a several-at-once build has one core: one worker
+        workers = int(os.environ.get(SWEEP_WORKERS_VARIABLE, "0")) or None
     shutil.rmtree(out_dir, ignore_errors=True)
     frame = run_sweep(chapter, grid, seeds, out_dir, fixed=fixed, quick=quick, workers=workers,
                       progress=False)
