@@ -344,6 +344,14 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     return frame
 
 
+def sweep_workers() -> int:
+    """Local workers a notebook's sweep gets: ``RAILPAPER_SWEEP_WORKERS`` (1 when chapters run
+    side by side, :mod:`railpaper.pipeline.chapter_process`), else one per core.  With one worker
+    a notebook may run its samples in its own process instead: the same numbers, without a
+    scheduler and a results file rewritten after every sample on the same core."""
+    return int(os.environ.get(SWEEP_WORKERS_VARIABLE, "0")) or os.cpu_count() or 1
+
+
 def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
                    out_dir: str | Path, *, grid: dict[str, list] | None = None,
                    quick: bool = False, require_ok: bool = False,
@@ -365,7 +373,7 @@ def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
     grid = dict(grid or {})
     fixed = {k: v for k, v in params.items() if k not in grid and k != SEED_PARAMETER}
     if workers is None:         # a chapter of a several-at-once build has one core: one worker
-        workers = int(os.environ.get(SWEEP_WORKERS_VARIABLE, "0")) or None
+        workers = sweep_workers()
     shutil.rmtree(out_dir, ignore_errors=True)
     frame = run_sweep(chapter, grid, seeds, out_dir, fixed=fixed, quick=quick, workers=workers,
                       progress=False)
