@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 from scipy import stats as st
 
+from railpaper import track
 from railpaper.discretise import foh, simulate_foh
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments.reduced_order_observer import evidence as ev
@@ -163,3 +164,25 @@ def test_never_converged_counts_as_duration():
     assert m["mc_convergence_time_s_worst_wheel"] == 0.2          # median of [0.6, 0.2, 0.2]
     assert m["mc_convergence_time_s_worst_wheel_high"] == params["duration_s"]
     assert m["mc_convergence_never_wheel"] == 1
+
+
+def test_hertz_linearisation_error_scales_with_the_irregularity_amplitude(small):
+    """The linearised contact's error is second order in the contact deflection: relative to the
+    force it falls in proportion to the irregularity's amplitude (the Taylor remainder of
+    (δ0 + δ)^(3/2) about δ0), so halving q halves it (observer started on the true state, so no
+    transient adds to it); the Monte Carlo table holds the same number for its sample."""
+    params, table = small
+    distance_m, profile_m = record.profile(params, params["seed"])
+    t_s, q = track.wheelset_inputs(distance_m, profile_m, params["speeds_kmh"][0] / 3.6, [0.0],
+                                   params["dt_s"], params["duration_s"])
+    exact_start = dict(params, initial_error_m=0.0)     # no observer transient: the contact only
+    full, half = (ev._hertz_samples(params["p0_basis"], exact_start, t_s, scale * q, [0])[0]
+                  for scale in (1.0, 0.5))
+    assert 0 < half < full
+    assert full / half == pytest.approx(2.0, rel=0.15)
+    row = table[(table.seed == params["seed"]) & (table.speed_kmh == params["speeds_kmh"][0])
+                & (table.reading == params["p0_basis"])]
+    assert row.force_relative_rms_error_hertz.iloc[0] == pytest.approx(ev._hertz_samples(
+        params["p0_basis"], params, t_s, q, [0])[0], rel=1e-9)     # one column vs a batch
+    other = table[table.reading != params["p0_basis"]]
+    assert other.force_relative_rms_error_hertz.isna().all()
