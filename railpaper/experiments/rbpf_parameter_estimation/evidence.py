@@ -12,13 +12,14 @@ comes from :mod:`railpaper.stats`; nothing here decides a verdict.
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
-from railpaper.stats import median_interval, rate
+from railpaper.stats import max_abs_bias, median_interval, rate
 
 
 # ----------------------------------------------------------------------------- toy, Eq. (18)
-def toy_metrics(stats: pd.DataFrame) -> dict:
+def toy_metrics(stats: pd.DataFrame, truth=None) -> dict:
     """Evidence metrics of the toy from its per-record table.
 
     Parameters
@@ -27,7 +28,10 @@ def toy_metrics(stats: pd.DataFrame) -> dict:
         One row per (record, initial condition) with columns ``seed``, ``init`` (1 or 2),
         ``ekf_converged``, ``ekf_diverged``, ``rbpf_converged`` (bool), ``ekf_err_max``,
         ``rbpf_err_max`` (final max |error| over x1..x4), ``ekf_settle``, ``rbpf_settle``
-        (steps, see :func:`railpaper.settling.settling_step`).
+        (steps, see :func:`railpaper.settling.settling_step`), and the signed final errors of
+        :func:`toy_bias_metrics`.
+    truth : (4,), optional
+        The true x1..x4; without it, no bias metrics.
 
     Returns
     -------
@@ -35,8 +39,8 @@ def toy_metrics(stats: pd.DataFrame) -> dict:
         ``toy_ekf_fail_rate_init1``, ``toy_ekf_blowup_rate_init1``,
         ``toy_ekf_converge_rate_init2``, ``toy_ekf_outcome_differs_rate``,
         ``toy_rbpf_converge_rate_init1``, ``toy_rbpf_converge_both_rate``,
-        ``toy_error_gap_ekf_minus_rbpf_init1``, ``toy_settle_gap_ekf_minus_rbpf_init1``, each
-        with ``_low``, ``_high``, ``_n``.
+        ``toy_error_gap_ekf_minus_rbpf_init1``, ``toy_settle_gap_ekf_minus_rbpf_init1`` and
+        those of :func:`toy_bias_metrics`, each with ``_low``, ``_high``, ``_n``.
     """
     one = stats[stats.init == 1].set_index("seed").sort_index()
     two = stats[stats.init == 2].set_index("seed").sort_index()
@@ -55,6 +59,27 @@ def toy_metrics(stats: pd.DataFrame) -> dict:
                .metrics("toy_error_gap_ekf_minus_rbpf_init1"))
     out.update(median_interval(one.ekf_settle - one.rbpf_settle)
                .metrics("toy_settle_gap_ekf_minus_rbpf_init1"))
+    if truth is not None:
+        out.update(toy_bias_metrics(two, truth))
+    return out
+
+
+def toy_bias_metrics(records: pd.DataFrame, truth) -> dict:
+    """Bias of the EKF and of the paper-scheme RBPF on the toy, from initial condition 2 (where
+    the EKF converges): per record the final errors θ̂_j − x_j relative to |x_j|, over the records
+    on which the EKF did not diverge numerically (the same records for both filters); the largest
+    |mean| over x1..x4 with its simultaneous 95 % interval (:func:`railpaper.stats.max_abs_bias`):
+    ``toy_ekf_max_abs_bias_init2``, ``toy_rbpf_max_abs_bias_init2`` with ``_low``, ``_high``,
+    ``_n``."""
+    scale = np.abs(np.asarray(truth, float))
+    columns = [f"x{j + 1}" for j in range(len(scale))]
+    ekf = records[[f"ekf_final_error_{c}" for c in columns]].to_numpy(float)
+    rbpf = records[[f"rbpf_final_error_{c}" for c in columns]].to_numpy(float)
+    kept = np.all(np.isfinite(ekf), axis=1)
+    if kept.sum() < 2:
+        return {}
+    out = max_abs_bias(ekf[kept] / scale).metrics("toy_ekf_max_abs_bias_init2")
+    out.update(max_abs_bias(rbpf[kept] / scale).metrics("toy_rbpf_max_abs_bias_init2"))
     return out
 
 
@@ -68,4 +93,4 @@ def evidence_table(metrics: dict, names: dict[str, str]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["statistic", "value", "low", "high", "n", "metric"])
 
 
-__all__ = ["evidence_table", "toy_metrics"]
+__all__ = ["evidence_table", "toy_bias_metrics", "toy_metrics"]

@@ -107,7 +107,7 @@ def _run(p: dict, progress) -> RbpfParameterEstimationResult:
         metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
         metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] = float(
             main.rbpf_working_err_max)
-    metrics.update(evidence.toy_metrics(st))
+    metrics.update(evidence.toy_metrics(st, toy.truth))
     t0 = time.perf_counter()
     toy = posterior.toy_posteriors(p, toy)                      # the exact posterior, toy
     timings["ibis_toy_s"] = time.perf_counter() - t0

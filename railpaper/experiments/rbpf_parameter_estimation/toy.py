@@ -87,7 +87,9 @@ def filter_record(p: dict, sim: Simulation, ic: int, rng: np.random.Generator) -
 
 
 def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
-    """One row of :attr:`ToyPart.records`: final errors, converged flags and settle steps."""
+    """One row of :attr:`ToyPart.records`: final errors, converged flags and settle steps, and
+    the signed final errors θ̂_j − x_j of the EKF (NaN after a numerical divergence) and of the
+    paper-scheme RBPF (``ekf_final_error_x<j>``, ``rbpf_final_error_x<j>``)."""
     x, tol = truth(p), p["toy_bias_tol"]
 
     def err(theta):                                       # max |error| over x_j per step
@@ -97,6 +99,10 @@ def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
     e_rb, e_rw, e_ek = err(run.rbpf_paper), err(run.rbpf_working), err(run.ekf)
     if run.ekf_diverged:
         e_ek[run.ekf_diverged_step - 1:] = EKF_BOUND
+    signed = {f"{key}_final_error_x{j + 1}": float(theta[-1, j] - x[j]) if ok else np.nan
+              for key, theta, ok in (("ekf", run.ekf, not run.ekf_diverged),
+                                     ("rbpf", run.rbpf_paper, True))
+              for j in range(len(x))}
     return dict(seed=seed, init=run.initial_condition, rbpf_err_max=e_rb[-1],
                 rbpf_working_err_max=e_rw[-1], ekf_err_max=e_ek[-1],
                 ekf_diverged=run.ekf_diverged,
@@ -107,7 +113,8 @@ def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
                 **{f"{key}_covers_x{j + 1}": bool(c) for key, (mean, sd) in
                    (("rbpf", (run.rbpf_paper, run.rbpf_paper_sd)),
                     ("rbpf_working", (run.rbpf_working, run.rbpf_working_sd)))
-                   for j, c in enumerate(gaussian_covers(mean[-1], sd[-1], x))})
+                   for j, c in enumerate(gaussian_covers(mean[-1], sd[-1], x))},
+                **signed)
 
 
 def run_toy(p: dict) -> ToyPart:

@@ -200,3 +200,30 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
     table = part.table()
     assert list(table.columns[:2]) == ["step", "x1_rbpf_init1"] and len(table) == 60
     np.testing.assert_array_equal(table.x3_ekf_init2, part.illustrated[2].ekf[:, 2])
+
+
+def test_toy_bias_metrics_drop_diverged_ekf_records_for_both_filters_and_match_scipy():
+    """Largest |mean relative error| over x1..x4 with Bonferroni t intervals, written out with
+    scipy: the records on which the EKF diverged (NaN) are left out for both filters."""
+    rng = np.random.default_rng(5)
+    truth = np.array([-0.4, 0.5, 0.5, 1.0])
+    n = 30
+    ekf = rng.normal([0.02, -0.1, 0.0, 0.05], 0.1, (n, 4))
+    rbpf = rng.normal(0.0, 0.1, (n, 4))
+    ekf[[3, 17]] = np.nan                               # two numerical divergences
+    table = pd.DataFrame({**{f"ekf_final_error_x{j + 1}": ekf[:, j] for j in range(4)},
+                          **{f"rbpf_final_error_x{j + 1}": rbpf[:, j] for j in range(4)}})
+    m = mc.toy_bias_metrics(table, truth)
+    kept = ~np.isnan(ekf).any(axis=1)
+    for name, errors in (("ekf", ekf[kept]), ("rbpf", rbpf[kept])):
+        rel = errors / np.abs(truth)
+        level = 1 - 0.05 / 4
+        half = st.t.ppf(0.5 + level / 2, kept.sum() - 1) * rel.std(axis=0, ddof=1) / np.sqrt(
+            kept.sum())
+        means = rel.mean(axis=0)
+        assert m[f"toy_{name}_max_abs_bias_init2"] == pytest.approx(np.abs(means).max())
+        assert m[f"toy_{name}_max_abs_bias_init2_low"] == pytest.approx(
+            max(0.0, np.max(np.maximum(means - half, -(means + half)))))
+        assert m[f"toy_{name}_max_abs_bias_init2_high"] == pytest.approx(
+            np.max(np.maximum(np.abs(means - half), np.abs(means + half))))
+        assert m[f"toy_{name}_max_abs_bias_init2_n"] == n - 2
