@@ -42,7 +42,7 @@ chromium:
 	else echo "make: the rendering test needs Chromium: run 'sudo apt-get install chromium' (Debian/Ubuntu), then 'make test' again" >&2; exit 1; fi
 
 test: venv chromium
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 # Regenerate the hashed lock from pyproject.toml (needs uv: `pip install uv`).
 lock:

@@ -3,18 +3,28 @@
 The quick book (:func:`railpaper.pipeline.book.build_book` with ``quick=True``: the four chapters
 through papermill, the bench at its smoke size (every key of the Performance page, least work:
 its numbers are not what the tests check), ``jupyter-book -W -n``) is what CI must prove builds; its
-chapter folders are also the quick runs every chapter test reads.  It is started in a background
-process as soon as the tests are collected, so it runs on the second core while the unit tests
-run on the first; the modules that read it run last, and the first of them waits for it.
+chapter folders are also the quick runs every chapter test reads.  It is built once per test
+session in a background process, started as soon as a worker has collected a test that reads it,
+so it runs beside the unit tests; the modules that read it run last, and the first of them waits
+for it.
+
+``make test`` runs the tests on two pytest-xdist workers (``-n 2 --dist loadfile``: a module stays
+on one worker, with its module fixtures), so the unit tests fill both cores around the book.  The
+workers share one book through a folder the controlling process makes (``RAILPAPER_QUICK_BOOK``):
+the first worker to claim it starts the build; every worker waits for the build's exit code file;
+the controlling process removes the folder (and stops a build still running) at the end.  A plain
+``pytest`` without workers does the same in its one process.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -23,7 +33,8 @@ REPO = Path(__file__).resolve().parents[1]
 RAILPAPER = [sys.executable, "-m", "railpaper"]
 #: Fixtures that read the session's quick book.
 BOOK_FIXTURES = {"quick_book", "quick_chapter_dir", "built_book"}
-_BUILD: dict = {}
+#: The environment variable that hands the shared book folder to the workers.
+SHARED = "RAILPAPER_QUICK_BOOK"
 
 
 def railpaper_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -33,56 +44,80 @@ def railpaper_cli(*args: str, timeout: float = 600) -> subprocess.CompletedProce
                           cwd=REPO, env=env)
 
 
+def _is_worker() -> bool:
+    return "PYTEST_XDIST_WORKER" in os.environ
+
+
+def pytest_configure(config):
+    """The controlling process (or a run without workers) makes the shared book folder."""
+    if not _is_worker():
+        os.environ[SHARED] = tempfile.mkdtemp(prefix="railpaper-quick-book-")
+
+
+def _root() -> Path:
+    return Path(os.environ[SHARED])
+
+
 def _start_quick_book() -> None:
-    """Start building the quick book into a fresh folder, in a process of its own."""
-    root = Path(tempfile.mkdtemp(prefix="railpaper-quick-book-"))
-    book = root / "book"
-    log = open(root / "build.log", "w")
+    """Start building the quick book into the shared folder, unless a worker already did: a
+    process of its own (its own session, so that a worker that finishes early does not stop it),
+    which writes its exit code to ``exit_code`` when done."""
+    root = _root()
+    try:
+        os.close(os.open(root / "claimed", os.O_CREAT | os.O_EXCL))
+    except FileExistsError:
+        return
     code = ("import sys; from railpaper.pipeline.book import build_book; "
             "build_book(quick=True, book_dir=sys.argv[1], progress=False, smoke_bench=True)")
-    process = subprocess.Popen([sys.executable, "-c", code, str(book)], cwd=REPO, stdout=log,
-                               stderr=subprocess.STDOUT,
+    script = '"$0" -c "$1" "$2" > "$3/build.log" 2>&1; echo $? > "$3/exit_code.part"; ' \
+             'mv "$3/exit_code.part" "$3/exit_code"'
+    process = subprocess.Popen(["sh", "-c", script, sys.executable, code, str(root / "book"),
+                                str(root)], cwd=REPO, start_new_session=True,
                                env=dict(os.environ, PYTHONWARNINGS="ignore"))
-    _BUILD.update(root=root, book=book, log=log, process=process)
+    (root / "pid").write_text(str(process.pid))
 
 
 def pytest_collection_modifyitems(session, config, items):
     """Modules that read the quick book run last (each module's own order kept, so its module
-    fixtures are set up once): the other tests then fill the first core while the book builds."""
+    fixtures are set up once): the other tests then fill the cores while the book builds."""
     reads_book = {item.module for item in items
                   if BOOK_FIXTURES & set(getattr(item, "fixturenames", ()))}
     items.sort(key=lambda item: item.module in reads_book)
 
 
 def pytest_collection_finish(session):
-    """Start the quick book at once if any selected test reads it."""
-    wanted = any(BOOK_FIXTURES & set(getattr(item, "fixturenames", ())) for item in session.items)
-    if wanted and not _BUILD:
+    """Start the quick book at once if any collected test reads it."""
+    if any(BOOK_FIXTURES & set(getattr(item, "fixturenames", ())) for item in session.items):
         _start_quick_book()
 
 
-def pytest_sessionfinish(session, exitstatus):
-    if _BUILD:
-        process = _BUILD["process"]
-        if process.poll() is None:
-            process.kill()
-            process.wait()
-        _BUILD["log"].close()
-        shutil.rmtree(_BUILD["root"], ignore_errors=True)
+def pytest_unconfigure(config):
+    """The controlling process stops a build still running and removes the shared folder."""
+    if _is_worker() or SHARED not in os.environ:
+        return
+    root = _root()
+    pid = root / "pid"
+    if pid.exists() and not (root / "exit_code").exists():
+        try:
+            os.killpg(int(pid.read_text()), signal.SIGKILL)
+        except (ProcessLookupError, PermissionError, ValueError):
+            pass
+    shutil.rmtree(root, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
 def quick_book() -> Path:
     """The session's quick book source folder (``chapters/<name>/`` hold the chapters' quick
     runs, ``_build/html`` the built book); waits for the background build."""
-    if not _BUILD:
-        _start_quick_book()
-    process = _BUILD["process"]
-    returncode = process.wait(timeout=3600)
-    _BUILD["log"].flush()
-    log = (_BUILD["root"] / "build.log").read_text()
+    _start_quick_book()                        # no-op if this or another worker started it
+    root, deadline = _root(), time.monotonic() + 3600
+    while not (root / "exit_code").exists():
+        assert time.monotonic() < deadline, "the quick book build did not finish within an hour"
+        time.sleep(1.0)
+    returncode = int((root / "exit_code").read_text())
+    log = (root / "build.log").read_text()
     assert returncode == 0, f"quick book build failed (exit {returncode}):\n{log[-4000:]}"
-    return _BUILD["book"]
+    return root / "book"
 
 
 @pytest.fixture(scope="session")
