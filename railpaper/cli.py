@@ -34,6 +34,27 @@ def _raise_interrupted(signum, frame):  # noqa: ARG001 - signal handler signatur
     raise Interrupted(signum)
 
 
+def interruption(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (SIGINT, or SIGTERM as :class:`Interrupted`) that ``exc`` was raised
+    while handling, if any: a signal that lands inside a library's locking (dask's
+    ``as_completed`` releasing its condition) can come out as that library's own error."""
+    while exc is not None:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        exc = exc.__context__
+    return None
+
+
+def _report_interrupt(args, exc: KeyboardInterrupt) -> int:
+    """One line and exit 128 + signal for an interrupted command."""
+    signum = exc.args[0] if isinstance(exc, Interrupted) else signal.SIGINT
+    kept = (f"finished samples kept in {args.out / 'results.csv'}; the same command resumes"
+            if args.func is cmd_sweep else "previous outputs left untouched")
+    print(f"railpaper: error: interrupted by {signal.Signals(signum).name}; {kept}",
+          file=sys.stderr)
+    return 128 + signum
+
+
 class _Loader(yaml.SafeLoader):
     """YAML, plus floats without a dot (``1e-4``, ``2E3``) that YAML 1.1 reads as strings."""
 
@@ -297,12 +318,12 @@ def main(argv: list[str] | None = None) -> int:
         print("railpaper: error: out of memory; use smaller sizes", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt as exc:
-        signum = exc.args[0] if isinstance(exc, Interrupted) else signal.SIGINT
-        kept = (f"finished samples kept in {args.out / 'results.csv'}; the same command resumes"
-                if args.func is cmd_sweep else "previous outputs left untouched")
-        print(f"railpaper: error: interrupted by {signal.Signals(signum).name}; {kept}",
-              file=sys.stderr)
-        return 128 + signum
+        return _report_interrupt(args, exc)
+    except RuntimeError as exc:
+        interrupt = interruption(exc)
+        if interrupt is None:
+            raise
+        return _report_interrupt(args, interrupt)
     finally:
         signal.signal(signal.SIGTERM, previous_handler)
 

@@ -1,8 +1,12 @@
 """CLI: bad input ends in one clear line and exit 2, before any kernel starts; track export."""
 
+import signal
+
 import pandas as pd
 import pytest
 from conftest import railpaper_cli
+
+from railpaper import cli
 
 
 @pytest.mark.parametrize("args, message", [
@@ -44,3 +48,31 @@ def test_track_list_and_run_list():
         assert name in result.stdout
     listing = railpaper_cli("list")
     assert listing.returncode == 0 and "speeds_kmh" in listing.stdout
+
+
+@pytest.mark.parametrize("signal_error", [KeyboardInterrupt(), cli.Interrupted(signal.SIGTERM)],
+                         ids=["SIGINT", "SIGTERM"])
+def test_a_signal_that_lands_in_a_library_lock_still_ends_in_one_line(monkeypatch, capsys,
+                                                                     signal_error):
+    """dask's as_completed can turn a Ctrl-C into 'RuntimeError: cannot release un-acquired lock'
+    raised while handling it: the command still ends as interrupted (one line, 128 + signal);
+    a RuntimeError of its own is not swallowed."""
+    def interrupted_inside_a_lock(args):
+        try:
+            raise signal_error
+        except KeyboardInterrupt:
+            raise RuntimeError("cannot release un-acquired lock") from None
+
+    monkeypatch.setattr(cli, "cmd_list", interrupted_inside_a_lock)
+    signum = signal_error.args[0] if signal_error.args else signal.SIGINT
+    assert cli.main(["list"]) == 128 + signum
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"railpaper: error: interrupted by {signal.Signals(signum).name}; previous "
+                   "outputs left untouched"]
+
+    def plain_runtime_error(args):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(cli, "cmd_list", plain_runtime_error)
+    with pytest.raises(RuntimeError, match="a bug"):
+        cli.main(["list"])
