@@ -15,7 +15,7 @@ from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments.reduced_order_observer import evidence as ev
 from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import record
-from railpaper.experiments.reduced_order_observer.spec import SPEC
+from railpaper.experiments.reduced_order_observer.spec import READINGS, SPEC
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settled_index
 
@@ -167,22 +167,25 @@ def test_never_converged_counts_as_duration():
 
 
 def test_hertz_linearisation_error_scales_with_the_irregularity_amplitude(small):
-    """The linearised contact's error is second order in the contact deflection: relative to the
+    """The linearised contact's error is second order in the dynamic deflection: relative to the
     force it falls in proportion to the irregularity's amplitude (the Taylor remainder of
-    (δ0 + δ)^(3/2) about δ0), so halving q halves it (observer started on the true state, so no
-    transient adds to it); the Monte Carlo table holds the same number for its sample."""
+    (δ0 + δ)^(3/2) about δ0), so halving q halves it; no observer is involved, so the observer's
+    initial error changes nothing; the Monte Carlo table holds the same number for its sample,
+    under both readings of P0."""
     params, table = small
     distance_m, profile_m = record.profile(params, params["seed"])
     t_s, q = track.wheelset_inputs(distance_m, profile_m, params["speeds_kmh"][0] / 3.6, [0.0],
                                    params["dt_s"], params["duration_s"])
-    exact_start = dict(params, initial_error_m=0.0)     # no observer transient: the contact only
-    full, half = (ev._hertz_samples(params["p0_basis"], exact_start, t_s, scale * q, [0])[0]
+    full, half = (ev._hertz_samples(params["p0_basis"], params, t_s, scale * q, [0])[0]
                   for scale in (1.0, 0.5))
     assert 0 < half < full
     assert full / half == pytest.approx(2.0, rel=0.15)
-    row = table[(table.seed == params["seed"]) & (table.speed_kmh == params["speeds_kmh"][0])
-                & (table.reading == params["p0_basis"])]
-    assert row.force_relative_rms_error_hertz.iloc[0] == pytest.approx(ev._hertz_samples(
-        params["p0_basis"], params, t_s, q, [0])[0], rel=1e-9)     # one column vs a batch
-    other = table[table.reading != params["p0_basis"]]
-    assert other.force_relative_rms_error_hertz.isna().all()
+    assert ev._hertz_samples(params["p0_basis"], dict(params, initial_error_m=0.0), t_s, q,
+                             [0])[0] == full
+    for reading in READINGS:
+        row = table[(table.seed == params["seed"]) & (table.reading == reading)
+                    & (table.speed_kmh == params["speeds_kmh"][0])]
+        assert row.force_relative_rms_error_hertz.iloc[0] == pytest.approx(
+            ev._hertz_samples(reading, params, t_s, q, [0])[0], rel=1e-9)   # one column vs a batch
+    sweep_only = table[~table.speed_kmh.isin(params["speeds_kmh"])]
+    assert sweep_only.force_relative_rms_error_hertz.isna().all()
