@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from railpaper import stats
+from railpaper import stats, track
 from railpaper.data import data_path, load_quantities, values
 from railpaper.estimators import functional_observer as fo
 from railpaper.models import vertical_10dof as v10
@@ -220,3 +220,39 @@ def printed_lmi19_blocks(H1: np.ndarray, H2: np.ndarray) -> dict:
     zero = int(H1.shape[1] + H2.shape[1])
     return {"lmi19_printed_zero_block_size": zero, "lmi19_printed_feasible": zero == 0,
             "lmi19_H1_norm": float(np.linalg.norm(H1))}
+
+
+
+def wheelset_rms(model: v10.Model, spectrum: str, band_m: tuple[float, float],
+                 speed_mps: float, n_points: int = 4000) -> tuple[np.ndarray, np.ndarray]:
+    """Stationary RMS displacement (m) and acceleration (m/s²), each (4,), of the four wheelsets
+    on a track of ``spectrum``.
+
+    The irregularity q(s) reaches wheelset k at s − o_k (``axle_offsets_m``), so for a unit
+    harmonic of spatial frequency Ω the wheelsets respond with Z(Ω) = L (jω I − A)⁻¹ B e(Ω),
+    ω = Ω V, e_k = exp(−jΩ o_k); with the profile's one-sided PSD S(Ω) on the wavelength band,
+    var z_i = ∫ |Z_i(Ω)|² S(Ω) dΩ and var z̈_i = ∫ ω⁴ |Z_i(Ω)|² S(Ω) dΩ (trapezoid on a log grid of
+    ``n_points``).  No simulation and no seed: the exact second moments of the linear model's
+    stationary response."""
+    omega = np.geomspace(2 * np.pi / band_m[1], 2 * np.pi / band_m[0], n_points)   # rad/m
+    offsets = np.asarray(model.parameters.axle_offsets_m)
+    n = model.A.shape[0]
+    resolvent = np.linalg.solve(1j * omega[:, None, None] * speed_mps * np.eye(n) - model.A,
+                                np.broadcast_to(model.B, (len(omega),) + model.B.shape))
+    z = np.einsum("ij,wjk,wk->wi", model.L, resolvent, np.exp(-1j * omega[:, None] * offsets))
+    density = np.abs(z) ** 2 * track.psd(spectrum, "vertical", omega)[:, None]
+    acceleration = density * (omega * speed_mps)[:, None] ** 4
+    return (np.sqrt(np.trapezoid(density, omega, axis=0)),
+            np.sqrt(np.trapezoid(acceleration, omega, axis=0)))
+
+
+def wheelset_similarity(model: v10.Model, spectrum: str, band_m: tuple[float, float],
+                        speeds_kmh) -> dict:
+    """``wheelset_rms_ratio_max_deviation``: over the speeds, both bogies and both quantities
+    (displacement, acceleration) of :func:`wheelset_rms`, the largest |RMS(w2)/RMS(w1) − 1| and
+    |RMS(w4)/RMS(w3) − 1| (the two wheelsets of one frame), 1."""
+    worst = 0.0
+    for speed in speeds_kmh:
+        for rms in wheelset_rms(model, spectrum, band_m, speed / 3.6):
+            worst = max(worst, abs(rms[1] / rms[0] - 1.0), abs(rms[3] / rms[2] - 1.0))
+    return {"wheelset_rms_ratio_max_deviation": float(worst)}

@@ -388,6 +388,8 @@ def _metrics(ctxs, p, truths, default, clean, mc) -> dict:
         metrics[f"hb0_fixed_pole_per_s_{reading}"] = float(np.max(rctx.hb0.fixed_poles.real))
         metrics.update(evidence.evidence_metrics(mc, reading))
     metrics.update(evidence.printed_lmi19(ctx.model))
+    metrics.update(evidence.wheelset_similarity(ctx.model, ctx.spectrum, ctx.band,
+                                                p["speeds_kmh"]))
     own = mc[mc.reading == p["suspension_reading"]]
     suffix = {"paper": "", "kalman": "_kalman", "hb0": "_hb0", "q": "_q"}
     for speed in p["speeds_kmh"]:
