@@ -27,7 +27,10 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from railpaper import track
+from railpaper.estimators.ekf import eq18_model
 from railpaper.experiments.base import (
     ParameterError,
     check_banks,
@@ -43,7 +46,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     RbpfParameterEstimationResult,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
-from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy
+from railpaper.experiments.rbpf_parameter_estimation.toy import TOY_INITS, run_toy
 from railpaper.models import lateral_16state as L
 from railpaper.threads import one_thread
 
@@ -107,11 +110,15 @@ def _run(p: dict, progress) -> RbpfParameterEstimationResult:
         metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
         metrics[f"toy_final_abs_error_max_rbpf_working_init{ic}"] = float(
             main.rbpf_working_err_max)
-    metrics.update(evidence.toy_metrics(st, toy.truth))
+    metrics.update(evidence.toy_metrics(st))
+    for ic, start in TOY_INITS.items():           # the EKF's first linearisation (§3.1's mechanism)
+        singular = np.linalg.svd(eq18_model(start)[0], compute_uv=False)
+        metrics[f"toy_ekf_transition_rcond_init{ic}"] = float(singular[-1] / singular[0])
     t0 = time.perf_counter()
     toy = posterior.toy_posteriors(p, toy)                      # the exact posterior, toy
     timings["ibis_toy_s"] = time.perf_counter() - t0
     metrics.update(posterior.toy_metrics(toy))
+    metrics.update(evidence.toy_offset_metrics(toy.records, toy.coverage, toy.truth))
     part, ts, mismatch = None, None, None
     if p["lateral"]:
         part, more, spent = lateral.run_lateral(p, progress)

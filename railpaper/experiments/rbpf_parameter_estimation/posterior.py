@@ -102,6 +102,7 @@ def toy_posteriors(p: dict, part: ToyPart) -> ToyPart:
         covers = credible_interval_covers(post, part.truth)
         for j in range(4):
             rows.append(dict(seed=seed, parameter=f"x{j + 1}", truth=part.truth[j],
+                             posterior_mean=post.mean[-1, j],
                              posterior_q05=post.q05[-1, j], posterior_q95=post.q95[-1, j],
                              posterior_covers=bool(covers[j]),
                              paper_covers=bool(one.loc[seed, f"rbpf_covers_x{j + 1}"]),

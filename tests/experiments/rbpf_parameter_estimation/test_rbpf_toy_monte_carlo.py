@@ -202,28 +202,39 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
     np.testing.assert_array_equal(table.x3_ekf_init2, part.illustrated[2].ekf[:, 2])
 
 
-def test_toy_bias_metrics_drop_diverged_ekf_records_for_both_filters_and_match_scipy():
-    """Largest |mean relative error| over x1..x4 with Bonferroni t intervals, written out with
-    scipy: the records on which the EKF diverged (NaN) are left out for both filters."""
+def test_toy_offset_metrics_read_converged_records_against_the_posterior_mean():
+    """Largest |median offset from the exact posterior mean| over x1..x4 with Bonferroni
+    order-statistic intervals, written out with numpy and scipy's binomial quantiles; records
+    where the EKF did not converge (and the other initial condition) are left out for both
+    filters."""
     rng = np.random.default_rng(5)
     truth = np.array([-0.4, 0.5, 0.5, 1.0])
-    n = 30
-    ekf = rng.normal([0.02, -0.1, 0.0, 0.05], 0.1, (n, 4))
-    rbpf = rng.normal(0.0, 0.1, (n, 4))
-    ekf[[3, 17]] = np.nan                               # two numerical divergences
-    table = pd.DataFrame({**{f"ekf_final_error_x{j + 1}": ekf[:, j] for j in range(4)},
-                          **{f"rbpf_final_error_x{j + 1}": rbpf[:, j] for j in range(4)}})
-    m = mc.toy_bias_metrics(table, truth)
-    kept = ~np.isnan(ekf).any(axis=1)
-    for name, errors in (("ekf", ekf[kept]), ("rbpf", rbpf[kept])):
-        rel = errors / np.abs(truth)
-        level = 1 - 0.05 / 4
-        half = st.t.ppf(0.5 + level / 2, kept.sum() - 1) * rel.std(axis=0, ddof=1) / np.sqrt(
-            kept.sum())
-        means = rel.mean(axis=0)
-        assert m[f"toy_{name}_max_abs_bias_init2"] == pytest.approx(np.abs(means).max())
-        assert m[f"toy_{name}_max_abs_bias_init2_low"] == pytest.approx(
-            max(0.0, np.max(np.maximum(means - half, -(means + half)))))
-        assert m[f"toy_{name}_max_abs_bias_init2_high"] == pytest.approx(
-            np.max(np.maximum(np.abs(means - half), np.abs(means + half))))
-        assert m[f"toy_{name}_max_abs_bias_init2_n"] == n - 2
+    n = 41
+    post = truth + rng.normal(0.0, 0.05, (n, 4))
+    ekf = post + rng.normal([0.01, -0.05, 0.0, 0.02], 0.05, (n, 4))
+    rbpf = post + rng.normal(0.0, 0.05, (n, 4))
+    converged = np.ones(n, bool)
+    converged[[3, 17]] = False
+    ekf[3] = 9.0                                        # a failed run: left out
+    rows = [dict(seed=i, init=2, ekf_converged=bool(converged[i]),
+                 **{f"ekf_final_error_x{j + 1}": ekf[i, j] - truth[j] for j in range(4)},
+                 **{f"rbpf_final_error_x{j + 1}": rbpf[i, j] - truth[j] for j in range(4)})
+            for i in range(n)]
+    rows += [dict(r, init=1, ekf_converged=False) for r in rows]
+    coverage = pd.DataFrame([dict(seed=i, parameter=f"x{j + 1}", posterior_mean=post[i, j])
+                             for i in range(n) for j in range(4)])
+    m = mc.toy_offset_metrics(pd.DataFrame(rows), coverage, truth)
+    for name, est in (("ekf", ekf), ("rbpf", rbpf)):
+        d = np.sort(((est - post) / np.abs(truth))[converged], axis=0)
+        k = len(d)
+        r = 0                                          # largest r: P(B <= r - 1) <= alpha / 2
+        while st.binom.cdf(r, k, 0.5) <= 0.05 / 4 / 2:
+            r += 1
+        low, high = d[max(r, 1) - 1], d[k - max(r, 1)]
+        med = np.median(d, axis=0)
+        assert m[f"toy_{name}_max_abs_offset_init2"] == pytest.approx(np.abs(med).max())
+        assert m[f"toy_{name}_max_abs_offset_init2_low"] == pytest.approx(
+            max(0.0, np.max(np.maximum(low, -high))))
+        assert m[f"toy_{name}_max_abs_offset_init2_high"] == pytest.approx(
+            np.max(np.maximum(np.abs(low), np.abs(high))))
+        assert m[f"toy_{name}_max_abs_offset_init2_n"] == n - 2
