@@ -174,24 +174,35 @@ def test_hb0_poles_at_primary_corner_in_both_readings(reading):
 
 
 def test_wheelset_rms_equals_python_control_response_integrated_by_quad():
-    """The stationary RMS of wheelset 2 (displacement, acceleration) from python-control's
-    frequency response with the axle delays, integrated against the track PSD by scipy's adaptive
-    quad, against the log-grid trapezoid of evidence.wheelset_rms."""
+    """The stationary RMS of wheelsets 1 and 2 (displacement, acceleration, contact deflection)
+    from python-control's frequency response with the axle delays, integrated against the track
+    PSD by scipy's adaptive quad, against the log-grid trapezoid of evidence.wheelset_rms; and
+    the deflection ratio of the two wheelsets of the first bogie, which the claim reads."""
     model = v10.build_model(v10.load_parameters())
     band, speed = (1.524, 304.8), 80 / 3.6
     system = control.ss(model.A, model.B, model.L, np.zeros((4, 4)))
     offsets = np.asarray(model.parameters.axle_offsets_m)
 
-    def density(omega, power):
-        z = system(1j * omega * speed) @ np.exp(-1j * omega * offsets)
-        return abs(z[1]) ** 2 * (omega * speed) ** (2 * power) * track.psd("fra-5", "vertical",
-                                                                           omega)
+    def density(omega, wheelset, quantity):
+        delays = np.exp(-1j * omega * offsets)
+        z = system(1j * omega * speed) @ delays
+        value = {"displacement": abs(z[wheelset]) ** 2,
+                 "acceleration": abs(z[wheelset]) ** 2 * (omega * speed) ** 4,
+                 "deflection": abs(z[wheelset] - delays[wheelset]) ** 2}[quantity]
+        return value * track.psd("fra-5", "vertical", omega)
 
-    lo, hi = 2 * np.pi / band[1], 2 * np.pi / band[0]
-    expected = [np.sqrt(quad(density, lo, hi, args=(power,), limit=400, epsrel=1e-8)[0])
-                for power in (0, 2)]
-    displacement, acceleration = ev.wheelset_rms(model, "fra-5", band, speed)
-    assert displacement[1] == pytest.approx(expected[0], rel=1e-4)
-    assert acceleration[1] == pytest.approx(expected[1], rel=1e-4)
-    similarity = ev.wheelset_similarity(model, "fra-5", band, [80.0])
-    assert 0 < similarity["wheelset_rms_ratio_max_deviation"] < 0.01     # close, not identical
+    def integral(wheelset, quantity):      # adaptive quad in log Ω, piece by piece
+        edges = np.linspace(np.log(2 * np.pi / band[1]), np.log(2 * np.pi / band[0]), 41)
+        return sum(quad(lambda u: density(np.exp(u), wheelset, quantity) * np.exp(u), a, b,
+                        limit=200, epsrel=1e-10)[0] for a, b in zip(edges[:-1], edges[1:]))
+
+    ours = dict(zip(("displacement", "acceleration", "deflection"),
+                    ev.wheelset_rms(model, "fra-5", band, speed)))
+    for quantity, rms in ours.items():
+        for wheelset in (0, 1):
+            expected = np.sqrt(integral(wheelset, quantity))
+            assert rms[wheelset] == pytest.approx(expected, rel=1e-4), (quantity, wheelset)
+    ratio = ours["deflection"][1] / ours["deflection"][0]
+    expected = np.sqrt(integral(1, "deflection") / integral(0, "deflection"))
+    assert ratio == pytest.approx(expected, abs=1e-5)
+    assert abs(ratio - 1) > 0.05            # the deflections of one bogie's wheelsets differ
