@@ -222,7 +222,6 @@ def printed_lmi19_blocks(H1: np.ndarray, H2: np.ndarray) -> dict:
             "lmi19_H1_norm": float(np.linalg.norm(H1))}
 
 
-
 def wheelset_rms(model: v10.Model, spectrum: str, band_m: tuple[float, float],
                  speed_mps: float, n_points: int = 4000
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
