@@ -58,6 +58,8 @@ def test_run_measures_by_hand():
     assert m["mean_relative_error"] == pytest.approx(rel.mean())
     assert m["relative_rms_error"] == pytest.approx(np.mean([0.1, 0, 0, 0]))
     assert m["rms_error_m"] == pytest.approx(np.sqrt(3 * 0.01 / 12))
+    # signed: wheelset 1's errors 0.1, -0.1, 0.1 average to 0.1 / 3 (|mean| / RMS 1)
+    assert m["biggest_mean_signed_relative_error"] == pytest.approx(0.1 / 3)
     ok = ev.run_measures(t, z, z + np.where(t[:, None] < 1, 0.5, 0.0), 0.2, 0.05, 1.0)
     assert ok["converged"] and ok["convergence_time_s"] == 1.0
 
@@ -73,7 +75,8 @@ def _runs_table(rng, seeds=7, speeds=(60.0, 80.0, 120.0, 160.0)):
                                  **{c: float(rng.random() + 0.1 * j) for c in (
                                      "convergence_time_s", "convergence_time_fixed_s",
                                      "max_error_after_1s_m", "relative_rms_error", "rms_error_m",
-                                     "biggest_mean_relative_error")}})
+                                     "biggest_mean_relative_error",
+                                     "biggest_mean_signed_relative_error")}})
     return pd.DataFrame(rows).sample(frac=1.0, random_state=1)     # order must not matter
 
 
@@ -105,6 +108,9 @@ def test_evidence_metrics_against_scipy():
         assert out[f"{stem}_symbols_rising_fraction"] == pytest.approx(rising / 7)
     top = grid("paper", "biggest_mean_relative_error")[:, -1]
     assert out["mc_biggest_mean_relative_error_symbols"] == pytest.approx(np.median(top))
+    signed = grid("paper", "biggest_mean_signed_relative_error")[:, -1]
+    assert out["mc_biggest_mean_signed_relative_error_symbols"] == pytest.approx(
+        np.median(signed))
     assert "mc_convergence_time_s_labels" not in out
 
 
