@@ -285,6 +285,24 @@ def max_abs_bias(errors, level: float = LEVEL) -> Estimate:
     if x.ndim != 2 or x.shape[0] < 2:
         raise ValueError(f"max_abs_bias needs shape (n >= 2, d), got {x.shape}")
     per = [mean_interval(col, 1.0 - (1.0 - level) / x.shape[1]) for col in x.T]
+    return largest_abs(per, level)
+
+
+def max_abs_median(samples, level: float = LEVEL) -> Estimate:
+    """Largest |median| over the columns of ``samples`` (n, d) with a simultaneous interval: each
+    column's median gets a distribution-free interval at the Bonferroni level
+    ``1 − (1 − level)/d`` (:func:`median_interval`), combined as in :func:`largest_abs`."""
+    x = np.asarray(samples, float)
+    if x.ndim != 2 or x.shape[0] < 2:
+        raise ValueError(f"max_abs_median needs shape (n >= 2, d), got {x.shape}")
+    return largest_abs([median_interval(col, 1.0 - (1.0 - level) / x.shape[1]) for col in x.T],
+                       level)
+
+
+def largest_abs(per: list[Estimate], level: float = LEVEL) -> Estimate:
+    """max_j |value_j| of simultaneous intervals ``per`` (one per parameter, all holding together
+    at ``level``): the interval of the largest |value| is [max_j distance of interval j from 0,
+    max_j largest |end| of interval j]."""
     return Estimate(max(abs(e.value) for e in per),
                     max(max(0.0, e.low, -e.high) for e in per),
-                    max(max(abs(e.low), abs(e.high)) for e in per), x.shape[0], level)
+                    max(max(abs(e.low), abs(e.high)) for e in per), per[0].n, level)
