@@ -62,7 +62,8 @@ def toy_metrics(stats: pd.DataFrame) -> dict:
 def toy_offset_metrics(records: pd.DataFrame, coverage: pd.DataFrame, truth) -> dict:
     """How far the EKF's final estimate lies from the exact posterior mean on the toy, typically.
 
-    From initial condition 2 (where the EKF converges), on the records where it converged
+    From initial condition 2 (where the EKF converges), on the records with an exact posterior
+    (``coverage``) where it converged
     (``ekf_converged``: final |error| within ``toy_bias_tol`` in every x_j, so a failed run is not
     read as an offset): per record and parameter the offset (x̂_j − E[x_j | y]) / |x_j| from the
     exact posterior mean (IBIS, ``coverage.posterior_mean``); per parameter its median with a
@@ -75,6 +76,7 @@ def toy_offset_metrics(records: pd.DataFrame, coverage: pd.DataFrame, truth) -> 
     names = [f"x{j + 1}" for j in range(len(scale))]
     two = records[(records.init == 2) & records.ekf_converged].set_index("seed").sort_index()
     mean = coverage.pivot(index="seed", columns="parameter", values="posterior_mean")
+    two = two[two.index.isin(mean.index)]                    # the records with a posterior
     mean = mean.loc[two.index, names].to_numpy(float)
     out = {}
     if len(two) < 2:

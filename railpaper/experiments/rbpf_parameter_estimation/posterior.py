@@ -90,12 +90,13 @@ def lateral_posterior(p: dict, system, record: LateralRecord, theta: np.ndarray,
 
 # ----------------------------------------------------------------------------- toy, every record
 def toy_posteriors(p: dict, part: ToyPart) -> ToyPart:
-    """IBIS on every toy record of ``part`` (records ``seed`` …, initial condition 1's box);
+    """IBIS on the first ``toy_ibis_records`` toy records of ``part`` (records ``seed`` …,
+    initial condition 1's box);
     returns ``part`` with :attr:`ToyPart.record`, :attr:`~ToyPart.posterior` (the illustrated
     record) and :attr:`~ToyPart.coverage` filled."""
     rows, first = [], None
     one = part.records[part.records.init == 1].set_index("seed")
-    for i in range(p["toy_seeds"]):
+    for i in range(min(p["toy_ibis_records"], p["toy_seeds"])):
         seed = p["seed"] + i
         sim = toy.simulate(p, np.random.default_rng(seed))   # the record run_toy filtered
         post = toy_posterior(p, sim, seed)

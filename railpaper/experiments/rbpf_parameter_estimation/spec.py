@@ -30,7 +30,7 @@ SPEC = ChapterSpec(
         P("toy_noise_var", 0.1, "float", "variance of W and V in Eq. (18), 1", positive=True),
         P("toy_steps", 500, "int", "measurements of each toy record", minimum=10),
         P("toy_particles", 300, "int", "RBPF particles (toy)", minimum=2),
-        P("toy_seeds", 90, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
+        P("toy_seeds", 300, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
           quick=40, minimum=1),
         P("toy_prior_halfwidth", 2.0, "float",
           "RBPF prior: uniform on initial condition +- this, per parameter, 1", positive=True),
@@ -88,7 +88,10 @@ SPEC = ChapterSpec(
           "illustrated record (the others get one each)", minimum=1),
         P("ekf_steps", 500, "int", "steps of each lateral EKF run (<= n_steps)", minimum=10),
         P("toy_ibis_particles", 1000, "int", "IBIS particles of the toy's exact posterior "
-          "(every toy record, prior box of initial condition 1)", minimum=10),
+          "(prior box of initial condition 1)", minimum=10),
+        P("toy_ibis_records", 90, "int", "toy records (the first ones, at most toy_seeds) on "
+          "which IBIS computes the exact posterior; coverage and the EKF's offset are counted on "
+          "them", quick=40, minimum=1),
         P("ibis_particles", 250, "int", "IBIS particles of the lateral exact posterior",
           quick=100, minimum=10),
         P("ibis_records", 30, "int", "lateral records (the first ones, at most n_records) on "

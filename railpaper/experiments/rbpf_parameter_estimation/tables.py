@@ -130,6 +130,7 @@ def caption_values(result, params: dict) -> dict[str, str]:
     """Numbers of this run for the captions and the text (Markdown strings, glued by name)."""
     toy, lat, m = result.toy, result.lateral, result.metrics
     out = {"seed": str(params["seed"]), "toy_records": str(params["toy_seeds"]),
+           "toy_ibis_records": str(min(params["toy_ibis_records"], params["toy_seeds"])),
            "toy_steps": str(toy.steps), "toy_never": str(toy.steps + 1),
            "toy_tol": number(params["toy_bias_tol"]),
            "speed": f"{number(params['speed_kmh'])} km/h",

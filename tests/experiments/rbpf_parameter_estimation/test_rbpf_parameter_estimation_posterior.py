@@ -22,10 +22,12 @@ G = np.array([-1.0, -1.3])          # Eq. (18)'s noise input, as printed
 
 @pytest.fixture(scope="module")
 def toy_files(tmp_path_factory):
-    """A toy-only chapter run (2 records), written as the pipeline writes it."""
+    """A toy-only chapter run (3 records, the exact posterior on the first 2), written as the
+    pipeline writes it."""
     before = numba.get_num_threads()
     numba.set_num_threads(1)
-    params = chapter.SPEC.resolve({"toy_seeds": 2, "lateral": False}, quick=True)
+    params = chapter.SPEC.resolve({"toy_seeds": 3, "toy_ibis_records": 2, "lateral": False},
+                                  quick=True)
     result = chapter.run(quick=True, **params)
     out = tmp_path_factory.mktemp("toy")
     write_outputs(out, chapter.SPEC, params, True, result)
@@ -120,7 +122,10 @@ def test_toy_coverage_table_and_metrics_count_by_hand(toy_files):
     params, result, _, _ = toy_files
     toy, m = result.toy, result.metrics
     cov = toy.coverage
-    assert len(cov) == 4 * params["toy_seeds"]
+    # the exact posterior (and so coverage and the EKF's offset) on the first toy_ibis_records
+    assert sorted(set(cov.seed)) == [params["seed"], params["seed"] + 1]
+    assert len(cov) == 4 * params["toy_ibis_records"] and params["toy_seeds"] == 3
+    assert m.get("toy_ekf_max_abs_offset_init2_n", 0) <= 2
     first = cov[cov.seed == params["seed"]]
     post, run = toy.posterior, toy.illustrated[1]
     for j, row in enumerate(first.itertuples()):
