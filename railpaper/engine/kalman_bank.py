@@ -4,8 +4,13 @@ Same model and conventions as :mod:`railpaper.engine.kalman`::
 
     x_k = F x_{k-1} + B u_k + noise(Q),   y_k = H x_k + noise(R)
 
-One call does the time update, the measurement update and the predictive log-likelihood of every
-filter.  It is written for speed, not generality:
+One call of :func:`kalman_step` (or :func:`kalman_run`, K steps) does the time update, the
+measurement update and the predictive log-likelihood of every filter.  The same step split in
+two, for a filter whose update matrices are known only after its weights (the Q-GRBPF, whose
+H(θ) is that of the new θ): :func:`kalman_predict` (time update and predictive
+log-likelihood, no gain, no covariance update) and :func:`kalman_update` (measurement update
+of a stored prior); both kernels share :func:`_kf_run`'s block functions, so predict + update
+gives the fused step's bits.  It is written for speed, not generality:
 
 * numba, parallel over blocks of ``BLOCK`` filters (``prange``); inside a block every operation
   runs over the filters in the innermost loop (structure of arrays), so each scalar formula of a
@@ -57,12 +62,155 @@ def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
                 C[j, i, q] = C[i, j, q]
 
 
+@numba.njit(fastmath={"contract"}, cache=True)
+def _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP):  # pragma: no cover - compiled
+    """Time update of a block: ``xp`` = x⁻, and P⁻ overwrites ``Pl``."""
+    n, nb = xl.shape
+    m = B.shape[2]
+    # x⁻ = F x + B u
+    xp[:] = 0.0
+    for i in range(n):
+        for k in range(n):
+            for q in range(nb):
+                xp[i, q] += Fl[i, k, q] * xl[k, q]
+        for c in range(m):
+            for q in range(nb):
+                xp[i, q] += B[(lo + q) * sB, i, c] * u[c]
+    stack_matmul(Fl, Pl, FP)              # F P
+    _symmetric_abt(FP, Fl, Q, lo, sQ, Pl)  # P⁻ = F P Fᵀ + Q; it overwrites Pl
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _innovation_block(Hl, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W, logdet, bad,
+                      loglik):  # pragma: no cover - compiled
+    """Predictive log-likelihood of a block, ``loglik`` = log N(y; H x⁻, H P⁻ Hᵀ + R), with the
+    whitened innovation ``z`` and, when ``gain``, the whitened gain ``W`` = L⁻¹ H P⁻ (zeroed,
+    with z, where S is not positive definite: no update there; log-likelihood −inf)."""
+    p, n, nb = Hl.shape
+    stack_matmul(Hl, Pl, HP)              # H P⁻ (p, n)
+    _symmetric_abt(HP, Hl, R, lo, sR, S)  # S = H P⁻ Hᵀ + R
+    # v = y − H x⁻
+    for r in range(p):
+        for q in range(nb):
+            v[r, q] = y[r]
+        for k in range(n):
+            for q in range(nb):
+                v[r, q] -= Hl[r, k, q] * xp[k, q]
+    # S = L Lᵀ (Cholesky per filter); not positive definite -> no update, −inf
+    logdet[:] = 0.0
+    bad[:] = False
+    for j in range(p):
+        for q in range(nb):
+            s = S[j, j, q]
+            for k in range(j):
+                s -= Lc[j, k, q] * Lc[j, k, q]
+            if not s > 0.0:               # also catches NaN
+                bad[q] = True
+                s = 1.0
+            Lc[j, j, q] = math.sqrt(s)
+            logdet[q] += math.log(s)
+        for i in range(j + 1, p):
+            for q in range(nb):
+                s = S[j, i, q]
+                for k in range(j):
+                    s -= Lc[i, k, q] * Lc[j, k, q]
+                Lc[i, j, q] = s / Lc[j, j, q]
+    # z = L⁻¹ v ; W = L⁻¹ H P⁻ (forward substitution)
+    for r in range(p):
+        for q in range(nb):
+            z[r, q] = v[r, q]
+        if gain:
+            for j in range(n):
+                for q in range(nb):
+                    W[r, j, q] = HP[r, j, q]
+        for k in range(r):
+            for q in range(nb):
+                z[r, q] -= Lc[r, k, q] * z[k, q]
+            if gain:
+                for j in range(n):
+                    for q in range(nb):
+                        W[r, j, q] -= Lc[r, k, q] * W[k, j, q]
+        for q in range(nb):
+            z[r, q] /= Lc[r, r, q]
+        if gain:
+            for j in range(n):
+                for q in range(nb):
+                    W[r, j, q] /= Lc[r, r, q]
+    # log N(v; 0, S) = −½ (zᵀz + log|S| + p log 2π)
+    for q in range(nb):
+        zz = 0.0
+        for r in range(p):
+            zz += z[r, q] * z[r, q]
+        loglik[q] = -math.inf if bad[q] else -0.5 * (zz + logdet[q] + p * LOG_2PI)
+        if bad[q] and gain:               # keep the prior: x = x⁻, P = P⁻
+            for r in range(p):
+                z[r, q] = 0.0
+                for j in range(n):
+                    W[r, j, q] = 0.0
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _posterior_block(xp, W, z, xl, Pl):  # pragma: no cover - compiled
+    """Measurement update of a block from its whitened gain: ``xl`` = x, P overwrites ``Pl``."""
+    p, n, nb = W.shape
+    # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
+    for i in range(n):
+        for q in range(nb):
+            acc = xp[i, q]
+            for r in range(p):
+                acc += W[r, i, q] * z[r, q]
+            xl[i, q] = acc
+    for r in range(p):
+        for i in range(n):
+            for j in range(i, n):
+                for q in range(nb):
+                    Pl[i, j, q] -= W[r, i, q] * W[r, j, q]
+    for i in range(n):
+        for j in range(i + 1, n):
+            for q in range(nb):
+                Pl[j, i, q] = Pl[i, j, q]
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _gather_block(x, P, rows, xl, Pl):  # pragma: no cover - compiled
+    """Filters ``rows`` of x (N, n), P (N, n, n) into a block (batch in the last axis)."""
+    n, nb = xl.shape
+    for i in range(n):
+        for q in range(nb):
+            xl[i, q] = x[rows[q], i]
+        for j in range(n):
+            for q in range(nb):
+                Pl[i, j, q] = P[rows[q], i, j]
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _gather_matrix(M, lo, stride, Ml):  # pragma: no cover - compiled
+    """Matrices ``M[(lo + q) · stride]`` of a block (stride 0: one matrix shared by all)."""
+    r, c, nb = Ml.shape
+    for i in range(r):
+        for j in range(c):
+            for q in range(nb):
+                Ml[i, j, q] = M[(lo + q) * stride, i, j]
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _scatter_block(xl, Pl, lo, x_out, P_out):  # pragma: no cover - compiled
+    """A block back into rows lo.. of x_out (N, n), P_out (N, n, n)."""
+    n, nb = xl.shape
+    for q in range(nb):
+        for i in range(n):
+            x_out[lo + q, i] = xl[i, q]
+            for j in range(n):
+                P_out[lo + q, i, j] = Pl[i, j, q]
+
+
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
             record, block):  # pragma: no cover - compiled
+    """Predict + update (:func:`_predict_block`, :func:`_innovation_block`,
+    :func:`_posterior_block`) of every filter over the rows of Y."""
     N, n = x_out.shape
     p = H.shape[1]
-    m = B.shape[2]
     n_steps = Y.shape[0]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
@@ -72,119 +220,85 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
         nb = min(block, N - lo)
         Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
-        anc = ancestors[lo:lo + nb]               # x, P from the ancestor: a resampling's copy
-        for i in range(n):                        # gather the block once (structure of arrays)
-            for q in range(nb):
-                xl[i, q] = x[anc[q], i]
-            for j in range(n):
-                for q in range(nb):
-                    Fl[i, j, q] = F[(lo + q) * sF, i, j]
-                for q in range(nb):
-                    Pl[i, j, q] = P[anc[q], i, j]
-        for r in range(p):
-            for j in range(n):
-                for q in range(nb):
-                    Hl[r, j, q] = H[(lo + q) * sH, r, j]
+        # gather the block once (structure of arrays); x, P from the ancestor: a resampling's
+        # copy
+        _gather_block(x, P, ancestors[lo:lo + nb], xl, Pl)
+        _gather_matrix(F, lo, sF, Fl)
+        _gather_matrix(H, lo, sH, Hl)
         xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
         z, W = np.empty((p, nb)), np.empty((p, n, nb))
-        logdet, bad = np.empty(nb), np.empty(nb, dtype=np.bool_)
+        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
         for t in range(n_steps):                  # the block stays in cache over the steps
-            # x⁻ = F x + B u
-            xp[:] = 0.0
-            for i in range(n):
-                for k in range(n):
-                    for q in range(nb):
-                        xp[i, q] += Fl[i, k, q] * xl[k, q]
-                for c in range(m):
-                    for q in range(nb):
-                        xp[i, q] += B[(lo + q) * sB, i, c] * U[t, c]
-            stack_matmul(Fl, Pl, FP)              # F P
-            _symmetric_abt(FP, Fl, Q, lo, sQ, Pl)  # P⁻ = F P Fᵀ + Q; it overwrites Pl
-            stack_matmul(Hl, Pl, HP)              # H P⁻ (p, n)
-            _symmetric_abt(HP, Hl, R, lo, sR, S)  # S = H P⁻ Hᵀ + R
-            # v = y − H x⁻
-            for r in range(p):
-                for q in range(nb):
-                    v[r, q] = Y[t, r]
-                for k in range(n):
-                    for q in range(nb):
-                        v[r, q] -= Hl[r, k, q] * xp[k, q]
-            # S = L Lᵀ (Cholesky per filter); not positive definite -> no update, −inf
-            logdet[:] = 0.0
-            bad[:] = False
-            for j in range(p):
-                for q in range(nb):
-                    s = S[j, j, q]
-                    for k in range(j):
-                        s -= Lc[j, k, q] * Lc[j, k, q]
-                    if not s > 0.0:               # also catches NaN
-                        bad[q] = True
-                        s = 1.0
-                    Lc[j, j, q] = math.sqrt(s)
-                    logdet[q] += math.log(s)
-                for i in range(j + 1, p):
-                    for q in range(nb):
-                        s = S[j, i, q]
-                        for k in range(j):
-                            s -= Lc[i, k, q] * Lc[j, k, q]
-                        Lc[i, j, q] = s / Lc[j, j, q]
-            # z = L⁻¹ v ; W = L⁻¹ H P⁻ (forward substitution)
-            for r in range(p):
-                for q in range(nb):
-                    z[r, q] = v[r, q]
-                for j in range(n):
-                    for q in range(nb):
-                        W[r, j, q] = HP[r, j, q]
-                for k in range(r):
-                    for q in range(nb):
-                        z[r, q] -= Lc[r, k, q] * z[k, q]
-                    for j in range(n):
-                        for q in range(nb):
-                            W[r, j, q] -= Lc[r, k, q] * W[k, j, q]
-                for q in range(nb):
-                    z[r, q] /= Lc[r, r, q]
-                for j in range(n):
-                    for q in range(nb):
-                        W[r, j, q] /= Lc[r, r, q]
-            # log N(v; 0, S) = −½ (zᵀz + log|S| + p log 2π)
+            _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
+            _innovation_block(Hl, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc, z, W,
+                              logdet, bad, ll)                                # z, W, log N
+            _posterior_block(xp, W, z, xl, Pl)                                # x, P
             for q in range(nb):
-                zz = 0.0
-                for r in range(p):
-                    zz += z[r, q] * z[r, q]
-                loglik[lo + q, t] = -math.inf if bad[q] else -0.5 * (zz + logdet[q]
-                                                                      + p * LOG_2PI)
-                if bad[q]:                        # keep the prior: x = x⁻, P = P⁻
-                    for r in range(p):
-                        z[r, q] = 0.0
-                        for j in range(n):
-                            W[r, j, q] = 0.0
-            # x = x⁻ + Wᵀ z ; P = P⁻ − Wᵀ W (upper triangle, mirrored)
-            for i in range(n):
-                for q in range(nb):
-                    acc = xp[i, q]
-                    for r in range(p):
-                        acc += W[r, i, q] * z[r, q]
-                    xl[i, q] = acc
-            for r in range(p):
-                for i in range(n):
-                    for j in range(i, n):
-                        for q in range(nb):
-                            Pl[i, j, q] -= W[r, i, q] * W[r, j, q]
-            for i in range(n):
-                for j in range(i + 1, n):
-                    for q in range(nb):
-                        Pl[j, i, q] = Pl[i, j, q]
+                loglik[lo + q, t] = ll[q]
             if record:
                 for q in range(nb):
                     for i in range(n):
                         x_hist[lo + q, t, i] = xl[i, q]
                         var_hist[lo + q, t, i] = Pl[i, i, q]
-        for q in range(nb):                       # scatter the block once
-            for i in range(n):
-                x_out[lo + q, i] = xl[i, q]
-                for j in range(n):
-                    P_out[lo + q, i, j] = Pl[i, j, q]
+        _scatter_block(xl, Pl, lo, x_out, P_out)  # scatter the block once
+
+
+@numba.njit(parallel=True, fastmath={"contract"}, cache=True)
+def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, x_prior, P_prior, loglik,
+                block):  # pragma: no cover - compiled
+    """Time update and predictive log-likelihood of every filter, no measurement update: the
+    same arithmetic as the first half of :func:`_kf_run`'s step, without the gain."""
+    N, n = x_prior.shape
+    p = H.shape[1]
+    sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
+    sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
+    n_blocks = (N + block - 1) // block
+    for b in numba.prange(n_blocks):
+        lo = b * block
+        nb = min(block, N - lo)
+        Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
+        xl = np.empty((n, nb))
+        _gather_block(x, P, ancestors[lo:lo + nb], xl, Pl)
+        _gather_matrix(F, lo, sF, Fl)
+        _gather_matrix(H, lo, sH, Hl)
+        xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
+        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
+        z, W = np.empty((p, nb)), np.empty((0, 0, 0))             # no gain: W unused
+        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
+        _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP)              # x⁻, P⁻
+        _innovation_block(Hl, Pl, xp, y, R, sR, lo, False, HP, S, v, Lc, z, W, logdet, bad,
+                          ll)                                               # log N(y; Hx⁻, S)
+        for q in range(nb):
+            loglik[lo + q] = ll[q]
+        _scatter_block(xp, Pl, lo, x_prior, P_prior)
+
+
+@numba.njit(parallel=True, fastmath={"contract"}, cache=True)
+def _kf_update(x_prior, P_prior, H, R, y, x_out, P_out, loglik,
+               block):  # pragma: no cover - compiled
+    """Measurement update of every filter from its stored prediction: the same arithmetic as
+    the second half of :func:`_kf_run`'s step."""
+    N, n = x_out.shape
+    p = H.shape[1]
+    sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
+    n_blocks = (N + block - 1) // block
+    for b in numba.prange(n_blocks):
+        lo = b * block
+        nb = min(block, N - lo)
+        Pl, Hl, xp = np.empty((n, n, nb)), np.empty((p, n, nb)), np.empty((n, nb))
+        _gather_block(x_prior, P_prior, np.arange(lo, lo + nb), xp, Pl)
+        _gather_matrix(H, lo, sH, Hl)
+        HP, xl = np.empty((p, n, nb)), np.empty((n, nb))
+        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
+        z, W = np.empty((p, nb)), np.empty((p, n, nb))
+        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
+        _innovation_block(Hl, Pl, xp, y, R, sR, lo, True, HP, S, v, Lc, z, W, logdet, bad,
+                          ll)                                               # z, W, log N
+        _posterior_block(xp, W, z, xl, Pl)                                  # x, P
+        for q in range(nb):
+            loglik[lo + q] = ll[q]
+        _scatter_block(xl, Pl, lo, x_out, P_out)
 
 
 def block_size(N: int) -> int:
@@ -311,3 +425,81 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
     U = None if u is None else np.asarray(u, float).reshape(1, -1)
     x_out, P_out, loglik = kalman_run(x, P, system, y, U, ancestors=ancestors)
     return x_out, P_out, loglik[:, 0]
+
+
+def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
+                   u: np.ndarray | None = None, ancestors: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Time update and predictive log-likelihood of N Kalman filters, no measurement update.
+
+    For a filter whose measurement update uses matrices known only after its weight (the
+    Q-GRBPF's step (4) with H(θ) of the new θ): :func:`kalman_update` of the returned prior
+    completes the step.  ``kalman_update(*kalman_predict(x, P, s, y, u)[:2], y, s.H, s.R)``
+    equals :func:`kalman_step` ``(x, P, s, y, u)`` (same arithmetic, in two kernels).
+
+    Parameters are those of :func:`kalman_step`.
+
+    Returns
+    -------
+    x_prior : (N, n), P_prior : (N, n, n)
+        ``x⁻ = F x + B u``, ``P⁻ = F P Fᵀ + Q``.
+    log_likelihood : (N,)
+        ``log N(y; H x⁻, H P⁻ Hᵀ + R)``; −inf where that S is not positive definite.
+    """
+    x = np.ascontiguousarray(x, dtype=float)
+    N, n = x.shape
+    if ancestors is None:
+        ancestors = np.arange(N)
+    else:
+        ancestors = np.ascontiguousarray(ancestors, dtype=np.int64)
+        if ancestors.ndim != 1 or (ancestors.size
+                                   and not 0 <= ancestors.min() <= ancestors.max() < N):
+            raise ValueError(f"kalman_predict: ancestors must be indices into the {N} filters")
+        N = len(ancestors)
+    y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
+    p = system.H.shape[-2]
+    B = system.B
+    if B is None or u is None:
+        B, u = None, np.zeros(1)
+    u = np.ascontiguousarray(np.asarray(u, float).reshape(-1))
+    x_prior, P_prior, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
+    _kf_predict(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
+                _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, _stack(system.H, (p, n)),
+                _stack(system.R, (p, p)), y, ancestors, x_prior, P_prior, loglik,
+                block_size(N))
+    return x_prior, P_prior, loglik
+
+
+def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np.ndarray,
+                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measurement update of N Kalman filters from their priors, in one compiled pass.
+
+    The update of :func:`kalman_step` (whitened gain ``W = L⁻¹ H P⁻``, ``S = L Lᵀ``)::
+
+        x = x⁻ + Wᵀ z,  z = L⁻¹ (y − H x⁻)      (= x⁻ + K v)
+        P = P⁻ − Wᵀ W                            (= P⁻ − K S Kᵀ, symmetric by construction)
+
+    Parameters
+    ----------
+    x_prior : ndarray, (N, n)
+    P_prior : ndarray, (N, n, n)
+        Prior means and covariances (e.g. from :func:`kalman_predict`).
+    y : ndarray, (p,)
+        Measurement shared by all filters.
+    H : ndarray, (p, n) or (N, p, n)
+    R : ndarray, (p, p) or (N, p, p)
+
+    Returns
+    -------
+    x_post : (N, n), P_post : (N, n, n), log_likelihood : (N,)
+        ``log N(y; H x⁻, H P⁻ Hᵀ + R)`` with these H, R.  Where S is not positive definite
+        that filter is not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf.
+    """
+    x_prior = np.ascontiguousarray(x_prior, dtype=float)
+    N, n = x_prior.shape
+    y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
+    p = y.shape[0]
+    x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
+    _kf_update(x_prior, np.ascontiguousarray(P_prior, dtype=float), _stack(H, (p, n)),
+               _stack(R, (p, p)), y, x_out, P_out, loglik, block_size(N))
+    return x_out, P_out, loglik

@@ -13,8 +13,12 @@ carries a Kalman filter for the linear state (same ``system(theta)`` interface a
     ``q_k(i)`` (Eqs. 10–11).
 (4) KF measurement update of particle i's state with the matrices of the new θ_k(i)
     (Eqs. 12–15).  As printed, the new θ_k(i) inherits the prior state of old particle i.
-    When H and R do not depend on θ (both toys) this update equals the one already done for
-    the likelihood of step (1), which is reused.
+    The compiled engine predicts once: step (1) is :func:`~railpaper.engine.kalman_bank.
+    kalman_predict` (prior and likelihood, no covariance update) and step (4)
+    :func:`~railpaper.engine.kalman_bank.kalman_update` of that stored prior with the new θ's
+    H and R (the lateral model's H holds rows of A(θ)).  The numpy engine (the reference)
+    runs a full predict + update in step (1) and, when H or R depend on θ, predicts again
+    for step (4); when they do not (both toys) it reuses the update of step (1).
 (5) "Search algorithm" (Eqs. 16–17): M = N uniforms u_p, each selects the index l with
     ``Σ_{j<l} q_j < u_p ≤ Σ_{j≤l} q_j``; (θ, x, P) of l are copied (multinomial resampling).
 
@@ -46,6 +50,7 @@ import numpy as np
 
 from railpaper.engine import affine_pass
 from railpaper.engine.kalman import predict, update
+from railpaper.engine.kalman_bank import kalman_predict, kalman_update
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.particles import (
     effective_sample_size,
@@ -119,7 +124,10 @@ class QuasiGaussianRBPF:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
         n_particles = self.theta.shape[0]
         s = self.sys
-        x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
+        if self.engine == "compiled":    # x⁻, P⁻ kept for (4): no posterior covariance here
+            x_prior, P_prior, loglik = kalman_predict(self.x, self.P, s, y, u)   # (6), (1)
+        else:
+            x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
         w, log_norm, degenerate = normalise_log_weights(loglik)             # Eq. 6
         ess = effective_sample_size(w)
         w = self._threshold(w)                                              # weight threshold
@@ -133,11 +141,10 @@ class QuasiGaussianRBPF:
                 degenerate = True
         q, _, flat = normalise_log_weights(log_d)                           # Eq. 11
         s_new = self.system(theta_new)
-        if _same_measurement_model(s, s_new):                               # (4): Eqs. 12-15
+        if self.engine == "compiled":       # (4): Eqs. 12-15, the old particle's prediction,
+            x, P, _ = kalman_update(x_prior, P_prior, y, s_new.H, s_new.R)    # the new θ's H, R
+        elif _same_measurement_model(s, s_new):
             x, P = x_post, P_post            # H, R do not depend on θ: same update as in (1)
-        elif self.engine == "compiled":     # the old particle's prediction, the new θ's H, R
-            mixed = LinearGaussianBatch(s.F, s.Q, s_new.H, s_new.R, s.B)
-            x, P, _ = bank_step(self.x, self.P, mixed, y, u, self.engine)
         else:
             x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)
             x, P, _, _, _ = update(x_prior, P_prior, y, s_new.H, s_new.R)

@@ -241,9 +241,10 @@ def test_compiled_qgrbpf_equals_numpy_qgrbpf_on_the_paper004_toy(weighting):
 def test_compiled_qgrbpf_second_update_equals_the_textbook_one_on_the_lateral_model(
         lateral_record):
     """H depends on θ in the lateral model, so step (4) is a second measurement update with the
-    new θ's H: the compiled bank (prediction redone in the kernel) against predict + Joseph
-    update, step by step from the same bank.  (Whole runs are not compared: the draws of Eq. 9
-    use an eigendecomposition, whose eigenvector signs a rounding difference can flip.)"""
+    new θ's H: the compiled split (kalman_predict, then kalman_update of the stored prior)
+    against predict + Joseph update, step by step from the same bank.  (Whole runs are not
+    compared: the draws of Eq. 9 use an eigendecomposition, whose eigenvector signs a rounding
+    difference can flip.)"""
     from railpaper.engine.qgrbpf import QuasiGaussianRBPF
     system, ys, u, theta0, _ = lateral_record("paper")
     filters = [QuasiGaussianRBPF(system, theta0, np.zeros(16), 1e-10 * np.eye(16),
