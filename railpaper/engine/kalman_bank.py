@@ -184,13 +184,24 @@ def _gather_block(x, P, rows, xl, Pl):  # pragma: no cover - compiled
 
 
 @numba.njit(fastmath={"contract"}, cache=True)
-def _gather_matrix(M, lo, stride, Ml):  # pragma: no cover - compiled
-    """Matrices ``M[(lo + q) · stride]`` of a block (stride 0: one matrix shared by all)."""
+def _gather_matrix(M, rows, stride, Ml):  # pragma: no cover - compiled
+    """Matrices ``M[rows[q] · stride]`` of a block (stride 0: one matrix shared by all)."""
     r, c, nb = Ml.shape
     for i in range(r):
         for j in range(c):
             for q in range(nb):
-                Ml[i, j, q] = M[(lo + q) * stride, i, j]
+                Ml[i, j, q] = M[rows[q] * stride, i, j]
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _gather_stack(M, rows, stride):  # pragma: no cover - compiled
+    """``M[rows[q] · stride]`` as a stack (nb, r, c), or (1, r, c) when shared (stride 0): read
+    at ``q · stride`` by the block functions (their ``lo`` = 0)."""
+    k = rows.shape[0] if stride else 1
+    out = np.empty((k, M.shape[1], M.shape[2]))
+    for q in range(k):
+        out[q] = M[rows[q] * stride]
+    return out
 
 
 @numba.njit(fastmath={"contract"}, cache=True)
@@ -223,8 +234,9 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
         # gather the block once (structure of arrays); x, P from the ancestor: a resampling's
         # copy
         _gather_block(x, P, ancestors[lo:lo + nb], xl, Pl)
-        _gather_matrix(F, lo, sF, Fl)
-        _gather_matrix(H, lo, sH, Hl)
+        own = np.arange(lo, lo + nb)              # the block's own matrices
+        _gather_matrix(F, own, sF, Fl)
+        _gather_matrix(H, own, sH, Hl)
         xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
         z, W = np.empty((p, nb)), np.empty((p, n, nb))
@@ -245,10 +257,11 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, x_prior, P_prior, loglik,
+def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, rows, x_prior, P_prior, loglik,
                 block):  # pragma: no cover - compiled
     """Time update and predictive log-likelihood of every filter, no measurement update: the
-    same arithmetic as the first half of :func:`_kf_run`'s step, without the gain."""
+    same arithmetic as the first half of :func:`_kf_run`'s step, without the gain.  Filter i
+    starts from x, P at ``ancestors[i]`` and uses the matrices at ``rows[i]``."""
     N, n = x_prior.shape
     p = H.shape[1]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
@@ -260,14 +273,17 @@ def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, x_prior, P_prior, loglik,
         Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         xl = np.empty((n, nb))
         _gather_block(x, P, ancestors[lo:lo + nb], xl, Pl)
-        _gather_matrix(F, lo, sF, Fl)
-        _gather_matrix(H, lo, sH, Hl)
+        mine = rows[lo:lo + nb]
+        _gather_matrix(F, mine, sF, Fl)
+        _gather_matrix(H, mine, sH, Hl)
+        Bl, Ql, Rl = _gather_stack(B, mine, sB), _gather_stack(Q, mine, sQ), \
+            _gather_stack(R, mine, sR)
         xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
         S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
         z, W = np.empty((p, nb)), np.empty((0, 0, 0))             # no gain: W unused
         logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
-        _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP)              # x⁻, P⁻
-        _innovation_block(Hl, Pl, xp, y, R, sR, lo, False, HP, S, v, Lc, z, W, logdet, bad,
+        _predict_block(Fl, xl, Pl, Bl, sB, u, Ql, sQ, 0, xp, FP)             # x⁻, P⁻
+        _innovation_block(Hl, Pl, xp, y, Rl, sR, 0, False, HP, S, v, Lc, z, W, logdet, bad,
                           ll)                                               # log N(y; Hx⁻, S)
         for q in range(nb):
             loglik[lo + q] = ll[q]
@@ -287,8 +303,9 @@ def _kf_update(x_prior, P_prior, H, R, y, x_out, P_out, loglik,
         lo = b * block
         nb = min(block, N - lo)
         Pl, Hl, xp = np.empty((n, n, nb)), np.empty((p, n, nb)), np.empty((n, nb))
-        _gather_block(x_prior, P_prior, np.arange(lo, lo + nb), xp, Pl)
-        _gather_matrix(H, lo, sH, Hl)
+        own = np.arange(lo, lo + nb)
+        _gather_block(x_prior, P_prior, own, xp, Pl)
+        _gather_matrix(H, own, sH, Hl)
         HP, xl = np.empty((p, n, nb)), np.empty((n, nb))
         S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
         z, W = np.empty((p, nb)), np.empty((p, n, nb))
@@ -427,8 +444,19 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
     return x_out, P_out, loglik[:, 0]
 
 
+def _indices(a: np.ndarray | None, N: int, default: int, name: str) -> np.ndarray:
+    """``a`` as int64 indices into N filters (default 0..default−1)."""
+    if a is None:
+        return np.arange(default)
+    a = np.ascontiguousarray(a, dtype=np.int64)
+    if a.ndim != 1 or (a.size and not 0 <= a.min() <= a.max() < N):
+        raise ValueError(f"kalman_predict: {name} must be indices into the {N} filters")
+    return a
+
+
 def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
-                   u: np.ndarray | None = None, ancestors: np.ndarray | None = None
+                   u: np.ndarray | None = None, ancestors: np.ndarray | None = None,
+                   matrix_rows: np.ndarray | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Time update and predictive log-likelihood of N Kalman filters, no measurement update.
 
@@ -437,7 +465,13 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     completes the step.  ``kalman_update(*kalman_predict(x, P, s, y, u)[:2], y, s.H, s.R)``
     equals :func:`kalman_step` ``(x, P, s, y, u)`` (same arithmetic, in two kernels).
 
-    Parameters are those of :func:`kalman_step`.
+    Parameters are those of :func:`kalman_step`, and
+
+    matrix_rows : ndarray of int, (N,), optional
+        Filter i uses the matrices of ``system`` at ``matrix_rows[i]`` (default i).  With
+        ``ancestors`` the same indices, filter i continues the whole filter ``ancestors[i]``,
+        state and matrices: a resampling's copy of a particle whose θ is not moved (the
+        Q-GRBPF's search), made in the kernel's gather instead of by copying the arrays.
 
     Returns
     -------
@@ -448,14 +482,9 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     """
     x = np.ascontiguousarray(x, dtype=float)
     N, n = x.shape
-    if ancestors is None:
-        ancestors = np.arange(N)
-    else:
-        ancestors = np.ascontiguousarray(ancestors, dtype=np.int64)
-        if ancestors.ndim != 1 or (ancestors.size
-                                   and not 0 <= ancestors.min() <= ancestors.max() < N):
-            raise ValueError(f"kalman_predict: ancestors must be indices into the {N} filters")
-        N = len(ancestors)
+    ancestors = _indices(ancestors, N, N, "ancestors")
+    N = len(ancestors)
+    matrix_rows = _indices(matrix_rows, N, N, "matrix_rows")
     y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
     p = system.H.shape[-2]
     B = system.B
@@ -465,8 +494,8 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     x_prior, P_prior, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
     _kf_predict(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
                 _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, _stack(system.H, (p, n)),
-                _stack(system.R, (p, p)), y, ancestors, x_prior, P_prior, loglik,
-                block_size(N))
+                _stack(system.R, (p, p)), y, ancestors, matrix_rows, x_prior, P_prior,
+                loglik, block_size(N))
     return x_prior, P_prior, loglik
 
 

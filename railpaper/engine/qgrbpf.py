@@ -21,6 +21,8 @@ carries a Kalman filter for the linear state (same ``system(theta)`` interface a
     for step (4); when they do not (both toys) it reuses the update of step (1).
 (5) "Search algorithm" (Eqs. 16–17): M = N uniforms u_p, each selects the index l with
     ``Σ_{j<l} q_j < u_p ≤ Σ_{j≤l} q_j``; (θ, x, P) of l are copied (multinomial resampling).
+    On the compiled engine x, P and the matrices are copied by the next step's gather
+    (``ancestors``), as the RBPF does.
 
 Ambiguities and how we resolve them
 -----------------------------------
@@ -112,6 +114,10 @@ class QuasiGaussianRBPF:
         self.system, self.rng, self.weighting = system, rng, weighting
         self.weight_threshold, self.search = float(weight_threshold), bool(search)
         self.theta, self.x, self.P, self.log_w, self.sys = initial_bank(system, theta0, x0, P0)
+        # searched but not yet copied (compiled engine): particle i continues the Kalman filter
+        # ancestors[i] of x, P and sys (its θ is already theta[i]); the next bank call's gather
+        # copies them
+        self.ancestors = None
 
     def _threshold(self, w: np.ndarray) -> np.ndarray:
         keep = w >= self.weight_threshold / len(w)
@@ -120,12 +126,21 @@ class QuasiGaussianRBPF:
         w = np.where(keep, w, 0.0)
         return w / w.sum()
 
+    def materialise(self) -> None:
+        """Make a pending search's copy now: afterwards particle i's Kalman filter is x[i],
+        P[i] with the matrices of sys at i, as on the numpy engine.  Later steps give the same
+        results either way (the kernel's gather reads the same numbers)."""
+        if self.ancestors is not None:
+            idx, self.ancestors = self.ancestors, None
+            self.x, self.P, self.sys = self.x[idx], self.P[idx], self.sys.take(idx)
+
     def step(self, y: np.ndarray, u: np.ndarray | None = None) -> StepEstimate:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
         n_particles = self.theta.shape[0]
         s = self.sys
         if self.engine == "compiled":    # x⁻, P⁻ kept for (4): no posterior covariance here
-            x_prior, P_prior, loglik = kalman_predict(self.x, self.P, s, y, u)   # (6), (1)
+            x_prior, P_prior, loglik = kalman_predict(self.x, self.P, s, y, u,  # (6), (1)
+                                                      self.ancestors, self.ancestors)
         else:
             x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
         w, log_norm, degenerate = normalise_log_weights(loglik)             # Eq. 6
@@ -149,13 +164,18 @@ class QuasiGaussianRBPF:
             x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)
             x, P, _, _, _ = update(x_prior, P_prior, y, s_new.H, s_new.R)
         x_mean, x_std = mixture_moments(x, P, q)
+        ancestors = None
         if self.search:                                                     # (5): Eqs. 16-17
             idx = multinomial_search_resample(q, self.rng)
-            theta_new, x, P, s_new = theta_new[idx], x[idx], P[idx], s_new.take(idx)
+            theta_new = theta_new[idx]
+            if self.engine == "compiled":     # x, P, matrices copied by the next gather
+                ancestors = idx
+            else:
+                x, P, s_new = x[idx], P[idx], s_new.take(idx)
             q = np.full(n_particles, 1.0 / n_particles)
         with np.errstate(divide="ignore"):
             self.log_w = np.log(q)
-        self.theta, self.x, self.P, self.sys = theta_new, x, P, s_new
+        self.theta, self.x, self.P, self.sys, self.ancestors = theta_new, x, P, s_new, ancestors
         return StepEstimate(theta_mean=theta_hat, theta_std=np.sqrt(np.diag(P_theta)),
                             x_mean=x_mean, x_std=x_std, ess=ess,
                             degenerate=bool(degenerate or flat),
@@ -169,6 +189,7 @@ class QuasiGaussianRBPF:
         row.  None (nothing done) otherwise."""
         if not affine_pass.applies(self.system, self.engine):
             return None
+        self.materialise()
         (mean, std, x_mean, x_std, ess, degenerate, log_evidence), (theta, x, P, q) = \
             affine_pass.qgrbpf_pass(self.system, self.theta, self.x, self.P, Y, U, self.rng,
                                     printed=self.weighting == "printed",

@@ -81,6 +81,25 @@ def test_predict_then_update_is_the_fused_kalman_step_bit_for_bit(N):
     np.testing.assert_allclose(loglik, innovation(xr, Pr, y, s.H, s.R)[0], rtol=1e-11)
 
 
+@pytest.mark.parametrize("per_filter", [False, True])
+def test_predict_with_matrix_rows_continues_whole_filters(per_filter):
+    """ancestors = matrix_rows = idx: filter i continues filter idx[i] with its state and its
+    matrices (a search's copy made in the gather), bit for bit the predict of the copies."""
+    rng = np.random.default_rng(4)
+    N = 150
+    s, x, P, y, u = random_bank(rng, N, n=5, p=3)
+    if per_filter:
+        s = LinearGaussianBatch(s.F, np.stack([random_spd(rng, 5) for _ in range(N)]), s.H,
+                                np.stack([random_spd(rng, 3) for _ in range(N)]), s.B)
+    idx = rng.integers(0, N, N)
+    gathered = kalman_predict(x, P, s, y, u, idx, idx)
+    copied = kalman_predict(x[idx], P[idx], s.take(idx), y, u)
+    for a, b in zip(gathered, copied):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="matrix_rows"):
+        kalman_predict(x, P, s, y, u, matrix_rows=np.array([N]))
+
+
 def theta_model(depends: str):
     """``system(θ)``, θ = (a, h): F(θ) = [[a, 0.2], [−0.1, 0.7]]; H(θ) = [[1, h], [0, 1]] when
     H depends on θ (else h = 1); R(θ) = diag(0.05 (1 + h²), 0.1) when R does too.  Not an
@@ -128,19 +147,25 @@ def test_compiled_qgrbpf_equals_numpy_qgrbpf_when_H_depends_on_theta(depends, we
     assert np.all(np.isfinite(runs[0].log_evidence))
 
 
-def test_compiled_qgrbpf_step_keeps_the_prediction_for_the_update():
+@pytest.mark.parametrize("search", [False, True])
+def test_compiled_qgrbpf_step_keeps_the_prediction_for_the_update(search):
     """One step by hand: the stored state is the measurement update, with the new θ's H and R,
-    of the OLD particle's prediction (its F, B), then the search's copy."""
+    of the OLD particle's prediction (its F, B), then the search's copy (pending until the
+    next step's gather, or materialise)."""
     system = theta_model("H and R")
-    theta0 = np.random.default_rng(8).uniform([0.2, 0.3], [0.95, 1.5], (50, 2))
-    x0, P0, y, u = np.array([0.3, -0.2]), 0.1 * np.eye(2), np.array([0.5, -0.1]), np.ones(1)
-    rng = np.random.default_rng(3)
-    filt = QuasiGaussianRBPF(system, theta0, x0, P0, rng, search=False)
+    rng = np.random.default_rng(8)
+    theta0 = rng.uniform([0.2, 0.3], [0.95, 1.5], (50, 2))
+    x0, P0 = rng.standard_normal((50, 2)), np.stack([random_spd(rng, 2) for _ in range(50)])
+    y, u = np.array([0.5, -0.1]), np.ones(1)
+    filt = QuasiGaussianRBPF(system, theta0, x0, P0, np.random.default_rng(3), search=search)
     filt.step(y, u)
-    old = system(theta0)
+    idx = filt.ancestors if search else np.arange(50)
+    assert (filt.ancestors is not None) == search
+    filt.materialise()
+    assert filt.ancestors is None
+    old = system(theta0).take(idx)                          # particle i continues idx[i]
     new = system(filt.theta)
-    x_prior, P_prior = predict(np.tile(x0, (50, 1)), np.tile(P0, (50, 1, 1)), old.F, old.Q,
-                               old.B, u)
+    x_prior, P_prior = predict(x0[idx], P0[idx], old.F, old.Q, old.B, u)
     kf_x, kf_P = [], []
     for i in range(50):
         kf = KalmanFilter(dim_x=2, dim_z=2)
