@@ -42,7 +42,7 @@ SPEC = ChapterSpec(
           "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
         P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
           quick=61, minimum=3),
-        P("n_monte_carlo", 250, "int", "records (seeds) of the Monte Carlo study", quick=50,
+        P("n_monte_carlo", 360, "int", "records (seeds) of the Monte Carlo study", quick=50,
           minimum=1),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
           "Monte Carlo records are record+1, record+2 and so on", minimum=0),
@@ -66,7 +66,7 @@ SPEC = ChapterSpec(
           "(its RBPF converges at step 55, read to ±5): errors are also taken at this step "
           "(the last one if the record is shorter)",
           minimum=1),
-        P("readings_records", 100, "int", "records per reading of the readings study (the "
+        P("readings_records", 200, "int", "records per reading of the readings study (the "
           "exact posterior under five readings of the printed Q, R and P0, each read at five "
           "figure horizons; 0 skips it)", quick=40, minimum=0),
         P("seed", 0, "int", "seed of records, initial particles and filters", minimum=0),
