@@ -445,12 +445,12 @@ def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np
 
 
 def _indices(a: np.ndarray | None, N: int, default: int, name: str) -> np.ndarray:
-    """``a`` as int64 indices into N filters (default 0..default−1)."""
+    """``a`` as int64 indices into N rows (filters or matrices; default 0..default−1)."""
     if a is None:
         return np.arange(default)
     a = np.ascontiguousarray(a, dtype=np.int64)
     if a.ndim != 1 or (a.size and not 0 <= a.min() <= a.max() < N):
-        raise ValueError(f"kalman_predict: {name} must be indices into the {N} filters")
+        raise ValueError(f"kalman_predict: {name} must be indices into {N} rows")
     return a
 
 
@@ -468,7 +468,8 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     Parameters are those of :func:`kalman_step`, and
 
     matrix_rows : ndarray of int, (N,), optional
-        Filter i uses the matrices of ``system`` at ``matrix_rows[i]`` (default i).  With
+        Filter i uses the matrices of ``system`` at ``matrix_rows[i]`` (default i; the
+        system may hold fewer models than there are filters).  With
         ``ancestors`` the same indices, filter i continues the whole filter ``ancestors[i]``,
         state and matrices: a resampling's copy of a particle whose θ is not moved (the
         Q-GRBPF's search), made in the kernel's gather instead of by copying the arrays.
@@ -484,7 +485,9 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     N, n = x.shape
     ancestors = _indices(ancestors, N, N, "ancestors")
     N = len(ancestors)
-    matrix_rows = _indices(matrix_rows, N, N, "matrix_rows")
+    batch = max([M.shape[0] for M in (system.F, system.Q, system.H, system.R, system.B)
+                 if M is not None and M.ndim == 3] or [N])      # shared: any row
+    matrix_rows = _indices(matrix_rows, batch, N, "matrix_rows")
     y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
     p = system.H.shape[-2]
     B = system.B

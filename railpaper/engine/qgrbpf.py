@@ -22,7 +22,10 @@ carries a Kalman filter for the linear state (same ``system(theta)`` interface a
 (5) "Search algorithm" (Eqs. 16–17): M = N uniforms u_p, each selects the index l with
     ``Σ_{j<l} q_j < u_p ≤ Σ_{j≤l} q_j``; (θ, x, P) of l are copied (multinomial resampling).
     On the compiled engine x, P and the matrices are copied by the next step's gather
-    (``ancestors``), as the RBPF does.
+    (``ancestors``), as the RBPF does.  When the model also gives its measurement matrices
+    alone (``system.measurement(θ) -> (H, R)``, the lateral vehicle), step (4) uses those and
+    the full matrices (the ZOH of A(θ)) are formed only for the θ the search keeps, about
+    63 % of them (1 − 1/e): a matrix depends on its own θ only, so the results are the same.
 
 Ambiguities and how we resolve them
 -----------------------------------
@@ -115,9 +118,10 @@ class QuasiGaussianRBPF:
         self.weight_threshold, self.search = float(weight_threshold), bool(search)
         self.theta, self.x, self.P, self.log_w, self.sys = initial_bank(system, theta0, x0, P0)
         # searched but not yet copied (compiled engine): particle i continues the Kalman filter
-        # ancestors[i] of x, P and sys (its θ is already theta[i]); the next bank call's gather
-        # copies them
-        self.ancestors = None
+        # ancestors[i] of x, P, with the matrices of sys at matrix_rows[i] (its θ is already
+        # theta[i]); the next bank call's gather copies them
+        self.ancestors, self.matrix_rows = None, None
+        self.measurement = getattr(system, "measurement", None)
 
     def _threshold(self, w: np.ndarray) -> np.ndarray:
         keep = w >= self.weight_threshold / len(w)
@@ -131,8 +135,9 @@ class QuasiGaussianRBPF:
         P[i] with the matrices of sys at i, as on the numpy engine.  Later steps give the same
         results either way (the kernel's gather reads the same numbers)."""
         if self.ancestors is not None:
-            idx, self.ancestors = self.ancestors, None
-            self.x, self.P, self.sys = self.x[idx], self.P[idx], self.sys.take(idx)
+            idx, rows = self.ancestors, self.matrix_rows
+            self.ancestors, self.matrix_rows = None, None
+            self.x, self.P, self.sys = self.x[idx], self.P[idx], self.sys.take(rows)
 
     def step(self, y: np.ndarray, u: np.ndarray | None = None) -> StepEstimate:
         """Process measurement ``y_k`` (input ``u_k`` of the transition into step k)."""
@@ -140,7 +145,7 @@ class QuasiGaussianRBPF:
         s = self.sys
         if self.engine == "compiled":    # x⁻, P⁻ kept for (4): no posterior covariance here
             x_prior, P_prior, loglik = kalman_predict(self.x, self.P, s, y, u,  # (6), (1)
-                                                      self.ancestors, self.ancestors)
+                                                      self.ancestors, self.matrix_rows)
         else:
             x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
         w, log_norm, degenerate = normalise_log_weights(loglik)             # Eq. 6
@@ -155,27 +160,38 @@ class QuasiGaussianRBPF:
             except np.linalg.LinAlgError:                                   # singular P_k
                 degenerate = True
         q, _, flat = normalise_log_weights(log_d)                           # Eq. 11
-        s_new = self.system(theta_new)
+        survivors_only = (self.engine == "compiled" and self.search
+                          and self.measurement is not None)
+        if survivors_only:                  # H, R now; F (the ZOH) after the search
+            H_new, R_new = self.measurement(theta_new)
+        else:
+            s_new = self.system(theta_new)
+            H_new, R_new = s_new.H, s_new.R
         if self.engine == "compiled":       # (4): Eqs. 12-15, the old particle's prediction,
-            x, P, _ = kalman_update(x_prior, P_prior, y, s_new.H, s_new.R)    # the new θ's H, R
+            x, P, _ = kalman_update(x_prior, P_prior, y, H_new, R_new)        # the new θ's H, R
         elif _same_measurement_model(s, s_new):
             x, P = x_post, P_post            # H, R do not depend on θ: same update as in (1)
         else:
             x_prior, P_prior = predict(self.x, self.P, s.F, s.Q, s.B, u)
             x, P, _, _, _ = update(x_prior, P_prior, y, s_new.H, s_new.R)
         x_mean, x_std = mixture_moments(x, P, q)
-        ancestors = None
+        ancestors = rows = None
         if self.search:                                                     # (5): Eqs. 16-17
             idx = multinomial_search_resample(q, self.rng)
+            if survivors_only:                # matrices of the kept θ only, once each
+                kept, rows = np.unique(idx, return_inverse=True)
+                s_new = self.system(theta_new[kept])
             theta_new = theta_new[idx]
             if self.engine == "compiled":     # x, P, matrices copied by the next gather
                 ancestors = idx
+                rows = idx if rows is None else rows
             else:
                 x, P, s_new = x[idx], P[idx], s_new.take(idx)
             q = np.full(n_particles, 1.0 / n_particles)
         with np.errstate(divide="ignore"):
             self.log_w = np.log(q)
-        self.theta, self.x, self.P, self.sys, self.ancestors = theta_new, x, P, s_new, ancestors
+        self.theta, self.x, self.P, self.sys = theta_new, x, P, s_new
+        self.ancestors, self.matrix_rows = ancestors, rows
         return StepEstimate(theta_mean=theta_hat, theta_std=np.sqrt(np.diag(P_theta)),
                             x_mean=x_mean, x_std=x_std, ess=ess,
                             degenerate=bool(degenerate or flat),

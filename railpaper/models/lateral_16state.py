@@ -157,7 +157,8 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
     changes only the rounding) is that of ``A(theta_ref)``, fixed when the system is made, so a
     matrix depends on its own θ only — not on the other particles, the order of calls or which
     filter called first; without ``theta_ref`` it is fixed at the first call, from that call's
-    first θ.  H(θ) is formed from the same affine terms (four rows of A(θ) and the yaw rate).
+    first θ.  H(θ) is formed from the same affine terms (four rows of A(θ) and the yaw rate);
+    ``system.measurement(theta) -> (H, R)`` gives it without the ZOH.
 
     Parameters
     ----------
@@ -177,16 +178,23 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
     prepared = [] if theta_ref is None else [   # the ZOH's pattern and balancing, made once
         AffineZOH(A0, Ak, B, dt_s, affine_balance(theta_ref, A0, Ak, B, dt_s))]
 
+    def measurement(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """H(θ) (N, 5, 16) and R alone, without the ZOH (the Q-GRBPF's update needs only these
+        for draws its search may drop)."""
+        theta = np.atleast_2d(np.asarray(theta, float))
+        H = np.zeros((len(theta), len(CHANNELS), N_STATES))
+        H[:, :4] = H0 + (theta @ Hk).reshape(len(theta), 4, N_STATES)
+        H[:, 4, YAW_RATE_STATE] = 1.0
+        return H, R
+
     def system(theta: np.ndarray) -> LinearGaussianBatch:
         theta = np.atleast_2d(np.asarray(theta, float))
         if not prepared:
             prepared.append(AffineZOH(A0, Ak, B, dt_s, affine_balance(theta[0], A0, Ak, B, dt_s)))
         F, G = prepared[0](theta)
-        H = np.zeros((len(theta), len(CHANNELS), N_STATES))
-        H[:, :4] = H0 + (theta @ Hk).reshape(len(theta), 4, N_STATES)
-        H[:, 4, YAW_RATE_STATE] = 1.0
-        return LinearGaussianBatch(F, Q, H, R, G)
+        return LinearGaussianBatch(F, Q, measurement(theta)[0], R, G)
 
+    system.measurement = measurement
     return system
 
 

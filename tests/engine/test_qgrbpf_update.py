@@ -175,3 +175,35 @@ def test_compiled_qgrbpf_step_keeps_the_prediction_for_the_update(search):
         kf_P.append(kf.P)
     np.testing.assert_allclose(filt.x, np.array(kf_x), rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(filt.P, np.array(kf_P), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("weighting", ["ratio", "printed"])
+def test_qgrbpf_forms_full_matrices_only_for_the_theta_its_search_keeps(weighting):
+    """With ``system.measurement`` (H, R alone) the compiled Q-GRBPF updates with those and
+    calls ``system`` after the search on the kept θ only, once each (the ZOH of the lateral
+    model is the expensive part); the run is bit for bit that of the same model without
+    ``measurement``, and each later system call holds at most 1 − (1 − 1/N)^N ≈ 63 % of N θ
+    in expectation (checked: fewer than N)."""
+    base = theta_model("H and R")
+    calls = []
+
+    def system(theta):
+        calls.append(len(theta))
+        return base(theta)
+
+    def measurement(theta):
+        s = base(theta)
+        return s.H, s.R
+
+    system.measurement = measurement
+    rng = np.random.default_rng(12)
+    theta0 = rng.uniform([0.2, 0.3], [0.95, 1.5], (200, 2))
+    ys, us = rng.standard_normal((25, 2)), rng.standard_normal((25, 1))
+    runs = [run_qgrbpf(model, ys, theta0, np.zeros(2), 0.1 * np.eye(2),
+                       np.random.default_rng(5), u=us, weighting=weighting)
+            for model in (system, base)]
+    for key in ("theta_mean", "theta_std", "x_mean", "x_std", "log_evidence", "theta"):
+        assert np.array_equal(getattr(runs[0], key), getattr(runs[1], key)), key
+    later = calls[1:]                                          # calls[0]: the initial bank
+    assert len(later) == len(ys) and all(len_ < 200 for len_ in later)
+    assert 0.55 < np.mean(later) / 200 < 0.72                  # 1 − 1/e ≈ 0.632

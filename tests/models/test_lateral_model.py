@@ -112,3 +112,18 @@ def test_ekf_model_derivatives_match_finite_differences():
         np.testing.assert_allclose(dF[k], (Fp - Fm) / (2 * h), rtol=1e-4, atol=1e-10)
         np.testing.assert_allclose(dG[k], (Gp - Gm) / (2 * h), rtol=1e-4, atol=1e-12)
         np.testing.assert_allclose(dH[k], (Hp - Hm) / (2 * h), rtol=1e-5, atol=1e-9)
+
+
+def test_lateral_measurement_alone_is_the_systems_H_and_R():
+    """``system.measurement(θ)`` (what the Q-GRBPF's update reads before its search) is, bit
+    for bit, the H and R of ``system(θ)``, and H's acceleration rows are those of A(θ) from
+    :func:`railpaper.models.lateral_16state.measurement_matrix`."""
+    R = np.diag([0.1, 0.1, 0.1, 0.01, 0.001]) ** 2
+    system = L.lateral_system(FIXED, V, 1e-3, 1e-10 * np.eye(16), R)
+    theta = THETA * np.random.default_rng(4).uniform(0.5, 1.7, (7, 5))
+    H, R_alone = system.measurement(theta)
+    s = system(theta)
+    assert np.array_equal(H, s.H) and np.array_equal(R_alone, s.R)
+    A0, Ak = L.affine_terms(FIXED, V)
+    np.testing.assert_allclose(H, L.measurement_matrix(L.a_of_theta(A0, Ak, theta)),
+                               rtol=1e-13, atol=1e-13)
