@@ -180,10 +180,14 @@ def _client(scheduler: str | None, workers: int | None):
 
 
 def _quiet_worker_logs() -> None:
-    """On a local worker: only errors of dask's loggers (an interrupted sweep otherwise ends in
-    'Async instruction … ended with CancelledError' warnings of the cancelled samples)."""
+    """On a local worker: only critical messages of dask's loggers.  An interrupted sweep
+    otherwise ends in 'Async instruction … ended with CancelledError' warnings of the cancelled
+    samples and, when the interrupt closes the scheduler while a worker is still busy, in that
+    worker's 'Failed to communicate with scheduler during heartbeat' error with a traceback.
+    Nothing is lost: a sample's own failure reaches the sweep through its future (its row's
+    ``error``), and a lost worker is reported by its nanny, in the sweep's process."""
     import logging
-    logging.getLogger("distributed").setLevel(logging.ERROR)
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def _close_quietly(client, cluster) -> None:
