@@ -23,8 +23,11 @@ never a vehicle, so the same code runs paper 004's toy and paper 003's 16-state 
 particle, Liu–West moves); ``grid_posterior`` the exact posterior of a low-dimensional θ on a
 grid; ``run_ibis`` the exact posterior of any θ by IBIS; ``run_qgrbpf`` paper 004's
 quasi-Gaussian RBPF; ``change_likelihoods`` and ``change_posterior`` the exact posterior of an
-abrupt parameter change (when, and to which value).  The parts: :mod:`~railpaper.engine.kalman` (the numpy reference step,
-Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank of N filters),
+abrupt parameter change (when, and to which value); ``whitened_innovations``,
+``cusum_variance`` and ``glr_mean_shift`` the classical residual test of one
+(:mod:`~railpaper.engine.residual_alarms`).  The parts: :mod:`~railpaper.engine.kalman` (the
+numpy reference step, Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank
+of N filters),
 :mod:`~railpaper.engine.affine_pass` (the RBPF and Q-GRBPF over a whole record in one compiled
 pass, for models affine in θ such as both toys),
 :mod:`~railpaper.engine.batch_expm` and :mod:`~railpaper.engine.sparse_zoh` (exact ZOH of stacks
@@ -47,11 +50,14 @@ from railpaper.engine.particles import liu_west_move, normalise_log_weights, sys
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
 from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, run_filter,
                                    run_rbpf)
+from railpaper.engine.residual_alarms import (Innovations, cusum_variance, first_alarm,
+                                              glr_mean_shift, whitened_innovations)
 
 __all__ = ["AffineSystem", "ChangeLikelihoods", "ChangePosterior", "FilterRun", "GridPosterior",
-           "IBISRun", "LinearGaussianBatch", "LinearGaussianSystem", "QuasiGaussianRBPF",
-           "RaoBlackwellisedPF", "StepEstimate", "adaptive_metropolis", "change_likelihoods",
-           "change_posterior", "crlb_std", "fisher_information", "grid_posterior",
-           "kalman_log_posterior", "kalman_run", "kalman_step", "liu_west_move",
-           "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf",
-           "systematic_resample", "update"]
+           "IBISRun", "Innovations", "LinearGaussianBatch", "LinearGaussianSystem",
+           "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate", "adaptive_metropolis",
+           "change_likelihoods", "change_posterior", "crlb_std", "cusum_variance", "first_alarm",
+           "fisher_information", "glr_mean_shift", "grid_posterior", "kalman_log_posterior",
+           "kalman_run", "kalman_step", "liu_west_move", "normalise_log_weights", "predict",
+           "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf", "systematic_resample", "update",
+           "whitened_innovations"]
