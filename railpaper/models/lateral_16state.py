@@ -150,7 +150,8 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
                    theta_ref: np.ndarray | None = None):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
 
-    The ZOH is :class:`railpaper.engine.sparse_zoh.AffineZOH` (prepared once per system): Taylor on the 45 nonzeros of
+    The ZOH is :class:`railpaper.engine.sparse_zoh.AffineZOH` (prepared once per system): Taylor
+    on the 45 nonzeros of
     ``[A(θ) dt | B dt]`` formed straight from θ (≈ 5e-16 relative to
     :func:`railpaper.discretise.zoh`'s scipy ``expm``; tests/engine/test_kalman_bank.py and
     tests/engine/test_batch_expm.py check it).  The powers-of-two balancing (an exact similarity: it
@@ -224,6 +225,40 @@ def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fin
     A = build_A_direct(fixed, theta, speed_mps)
     F, G = zoh(A, input_matrix(), dt_fine_s)
     return simulate_zoh(F, G, u_fine, np.zeros(N_STATES))
+
+
+def simulate_truth_with_change(fixed: dict, theta_before, theta_after, change_step: int,
+                               speed_mps: float, dt_fine_s: float, u_fine: np.ndarray
+                               ) -> np.ndarray:
+    """:func:`simulate_truth` with an abrupt parameter change: θ = ``theta_before`` over fine
+    steps 1 … ``change_step`` and ``theta_after`` from fine step ``change_step`` + 1 on (a
+    failed damper, a softened spring), the state carried across the change.
+
+    Returns ``x`` (K+1, 16) as :func:`simulate_truth`.  A fault that makes the linear model
+    unstable at this speed (a lost anti-yaw damper above its critical speed) grows without
+    bound; :func:`flange_contact_step` finds where the record must end.
+    """
+    K = len(u_fine)
+    if not 0 <= change_step <= K:
+        raise ValueError(f"change_step must lie in 0 … {K} (the record's fine steps), "
+                         f"got {change_step}")
+    before = simulate_truth(fixed, theta_before, speed_mps, dt_fine_s, u_fine[:change_step])
+    A = build_A_direct(fixed, theta_after, speed_mps)
+    F, G = zoh(A, input_matrix(), dt_fine_s)
+    after = simulate_zoh(F, G, u_fine[change_step:], before[-1])
+    return np.vstack([before, after[1:]])
+
+
+def flange_contact_step(x: np.ndarray, clearance_m: float) -> int:
+    """First row of states ``x`` (K+1, 16) at which either wheelset's lateral displacement
+    relative to the track (``d1``, ``d2`` = yw − yt) reaches ``clearance_m`` (m; the flangeway
+    clearance, beyond which the linear model without flange contact no longer holds); −1 if
+    none."""
+    if not clearance_m > 0:
+        raise ValueError(f"clearance_m must be > 0, got {clearance_m}")
+    lateral = np.abs(x[:, [STATE_NAMES.index("d1"), STATE_NAMES.index("d2")]])
+    hits = np.flatnonzero((lateral >= clearance_m).any(axis=1))
+    return int(hits[0]) if hits.size else -1
 
 
 def ekf_model(fixed: dict, speed_mps: float, dt_s: float):

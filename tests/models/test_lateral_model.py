@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
+from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from railpaper.data import load_quantities
@@ -127,3 +128,38 @@ def test_lateral_measurement_alone_is_the_systems_H_and_R():
     A0, Ak = L.affine_terms(FIXED, V)
     np.testing.assert_allclose(H, L.measurement_matrix(L.a_of_theta(A0, Ak, theta)),
                                rtol=1e-13, atol=1e-13)
+
+
+def test_truth_with_change_equals_the_switching_ode_integrated_by_scipy():
+    """A failed anti-yaw damper (Csaly × 0) at fine step 300 of 600: the states equal the
+    continuous model dx/dt = A(θ(t)) x + B u(t), u held over each fine step and A switching at
+    the change, integrated by scipy's solve_ivp (an independent reference, not the ZOH);
+    with θ_after = θ_before the record is simulate_truth's, bit for bit."""
+    dt, K, c = 1e-4, 600, 300
+    u = 0.02 * np.random.default_rng(6).standard_normal((K, 2))
+    after = THETA.copy()
+    after[L.PARAM_NAMES.index("csaly")] = 0.0
+    x = L.simulate_truth_with_change(FIXED, THETA, after, c, V, dt, u)
+    A0, A1 = L.build_A_direct(FIXED, THETA, V), L.build_A_direct(FIXED, after, V)
+    Bc = L.input_matrix()
+    state = np.zeros(16)
+    for k in range(K):
+        A = A0 if k < c else A1
+        state = solve_ivp(lambda t, s: A @ s + Bc @ u[k], (0.0, dt), state, method="DOP853",
+                          rtol=1e-11, atol=1e-16).y[:, -1]
+        if k + 1 in (c, c + 1, K):
+            np.testing.assert_allclose(x[k + 1], state, rtol=1e-7, atol=1e-13)
+    same = L.simulate_truth_with_change(FIXED, THETA, THETA, c, V, dt, u)
+    assert np.array_equal(same, L.simulate_truth(FIXED, THETA, V, dt, u))
+
+
+def test_flange_contact_step_reads_the_relative_displacements():
+    x = np.zeros((6, 16))
+    x[3, L.STATE_NAMES.index("d2")] = -0.008
+    x[4, L.STATE_NAMES.index("yw1")] = 0.02           # absolute, not relative to the track
+    assert L.flange_contact_step(x, 0.008) == 3
+    assert L.flange_contact_step(x, 0.009) == -1
+    with pytest.raises(ValueError, match="clearance_m"):
+        L.flange_contact_step(x, 0.0)
+    with pytest.raises(ValueError, match="change_step"):
+        L.simulate_truth_with_change(FIXED, THETA, THETA, 7, V, 1e-4, np.zeros((5, 2)))
