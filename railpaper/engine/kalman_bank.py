@@ -62,7 +62,7 @@ def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
                 C[j, i, q] = C[i, j, q]
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP):  # pragma: no cover - compiled
     """Time update of a block: ``xp`` = x⁻, and P⁻ overwrites ``Pl``."""
     n, nb = xl.shape
@@ -80,7 +80,7 @@ def _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP):  # pragma: no cover
     _symmetric_abt(FP, Fl, Q, lo, sQ, Pl)  # P⁻ = F P Fᵀ + Q; it overwrites Pl
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _innovation_block(Hl, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W, logdet, bad,
                       loglik):  # pragma: no cover - compiled
     """Predictive log-likelihood of a block, ``loglik`` = log N(y; H x⁻, H P⁻ Hᵀ + R), with the
@@ -149,7 +149,7 @@ def _innovation_block(Hl, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W, logdet
                     W[r, j, q] = 0.0
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _posterior_block(xp, W, z, xl, Pl):  # pragma: no cover - compiled
     """Measurement update of a block from its whitened gain: ``xl`` = x, P overwrites ``Pl``."""
     p, n, nb = W.shape
@@ -171,7 +171,7 @@ def _posterior_block(xp, W, z, xl, Pl):  # pragma: no cover - compiled
                 Pl[j, i, q] = Pl[i, j, q]
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _gather_block(x, P, rows, xl, Pl):  # pragma: no cover - compiled
     """Filters ``rows`` of x (N, n), P (N, n, n) into a block (batch in the last axis)."""
     n, nb = xl.shape
@@ -183,7 +183,7 @@ def _gather_block(x, P, rows, xl, Pl):  # pragma: no cover - compiled
                 Pl[i, j, q] = P[rows[q], i, j]
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _gather_matrix(M, rows, stride, Ml):  # pragma: no cover - compiled
     """Matrices ``M[rows[q] · stride]`` of a block (stride 0: one matrix shared by all)."""
     r, c, nb = Ml.shape
@@ -204,7 +204,7 @@ def _gather_stack(M, rows, stride):  # pragma: no cover - compiled
     return out
 
 
-@numba.njit(fastmath={"contract"}, cache=True, inline="always")
+@numba.njit(fastmath={"contract"}, cache=True)
 def _scatter_block(xl, Pl, lo, x_out, P_out):  # pragma: no cover - compiled
     """A block back into rows lo.. of x_out (N, n), P_out (N, n, n)."""
     n, nb = xl.shape
