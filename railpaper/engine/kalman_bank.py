@@ -215,6 +215,17 @@ def _scatter_block(xl, Pl, lo, x_out, P_out):  # pragma: no cover - compiled
                 P_out[lo + q, i, j] = Pl[i, j, q]
 
 
+@numba.njit(cache=True)
+def _innovation_workspace(n, p, nb, gain):  # pragma: no cover - compiled
+    """Scratch arrays of :func:`_innovation_block` for a block of nb filters: ``HP`` (H P⁻),
+    ``S``, ``v``, ``Lc`` (its Cholesky factor), ``z``, ``W`` (the whitened gain, empty without
+    ``gain``), ``logdet``, ``bad`` and ``ll`` (the log-likelihoods)."""
+    W = np.empty((p, n, nb)) if gain else np.empty((0, 0, 0))
+    return (np.empty((p, n, nb)), np.empty((p, p, nb)), np.empty((p, nb)),
+            np.zeros((p, p, nb)), np.empty((p, nb)), W, np.empty(nb),
+            np.empty(nb, dtype=np.bool_), np.empty(nb))
+
+
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
             record, block):  # pragma: no cover - compiled
@@ -237,10 +248,8 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
         own = np.arange(lo, lo + nb)              # the block's own matrices
         _gather_matrix(F, own, sF, Fl)
         _gather_matrix(H, own, sH, Hl)
-        xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
-        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
-        z, W = np.empty((p, nb)), np.empty((p, n, nb))
-        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
+        xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
+        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
         for t in range(n_steps):                  # the block stays in cache over the steps
             _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
             _innovation_block(Hl, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc, z, W,
@@ -278,10 +287,8 @@ def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, rows, x_prior, P_prior, lo
         _gather_matrix(H, mine, sH, Hl)
         Bl, Ql, Rl = _gather_stack(B, mine, sB), _gather_stack(Q, mine, sQ), \
             _gather_stack(R, mine, sR)
-        xp, FP, HP = np.empty((n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
-        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
-        z, W = np.empty((p, nb)), np.empty((0, 0, 0))             # no gain: W unused
-        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
+        xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
+        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, False)
         _predict_block(Fl, xl, Pl, Bl, sB, u, Ql, sQ, 0, xp, FP)             # x⁻, P⁻
         _innovation_block(Hl, Pl, xp, y, Rl, sR, 0, False, HP, S, v, Lc, z, W, logdet, bad,
                           ll)                                               # log N(y; Hx⁻, S)
@@ -306,10 +313,8 @@ def _kf_update(x_prior, P_prior, H, R, y, x_out, P_out, loglik,
         own = np.arange(lo, lo + nb)
         _gather_block(x_prior, P_prior, own, xp, Pl)
         _gather_matrix(H, own, sH, Hl)
-        HP, xl = np.empty((p, n, nb)), np.empty((n, nb))
-        S, v, Lc = np.empty((p, p, nb)), np.empty((p, nb)), np.zeros((p, p, nb))
-        z, W = np.empty((p, nb)), np.empty((p, n, nb))
-        logdet, bad, ll = np.empty(nb), np.empty(nb, dtype=np.bool_), np.empty(nb)
+        xl = np.empty((n, nb))
+        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
         _innovation_block(Hl, Pl, xp, y, R, sR, lo, True, HP, S, v, Lc, z, W, logdet, bad,
                           ll)                                               # z, W, log N
         _posterior_block(xp, W, z, xl, Pl)                                  # x, P
