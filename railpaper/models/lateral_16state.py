@@ -242,11 +242,30 @@ def simulate_truth_with_change(fixed: dict, theta_before, theta_after, change_st
     if not 0 <= change_step <= K:
         raise ValueError(f"change_step must lie in 0 … {K} (the record's fine steps), "
                          f"got {change_step}")
-    before = simulate_truth(fixed, theta_before, speed_mps, dt_fine_s, u_fine[:change_step])
-    A = build_A_direct(fixed, theta_after, speed_mps)
-    F, G = zoh(A, input_matrix(), dt_fine_s)
-    after = simulate_zoh(F, G, u_fine[change_step:], before[-1])
-    return np.vstack([before, after[1:]])
+    return simulate_truth_schedule(fixed, [theta_before, theta_after], [0, change_step],
+                                   speed_mps, dt_fine_s, u_fine)
+
+
+def simulate_truth_schedule(fixed: dict, thetas, starts, speed_mps: float, dt_fine_s: float,
+                            u_fine: np.ndarray) -> np.ndarray:
+    """:func:`simulate_truth` with θ piecewise constant: ``thetas[s]`` from fine step
+    ``starts[s]`` + 1 on (``starts[0]`` = 0, strictly increasing), the state carried across
+    every change (a damper failing at once is two pieces; a gradual loss, many).
+
+    Returns ``x`` (K+1, 16) as :func:`simulate_truth`.
+    """
+    K = len(u_fine)
+    starts = [int(s) for s in starts]
+    if len(starts) != len(thetas) or not starts or starts[0] != 0 \
+            or any(b < a for a, b in zip(starts, starts[1:])) or starts[-1] > K:
+        raise ValueError(f"starts must begin at 0 and not decrease up to {K}, one per theta; "
+                         f"got {starts}")
+    ends = starts[1:] + [K]
+    pieces = [simulate_truth(fixed, thetas[0], speed_mps, dt_fine_s, u_fine[:ends[0]])]
+    for theta, a, b in zip(thetas[1:], starts[1:], ends[1:]):
+        F, G = zoh(build_A_direct(fixed, theta, speed_mps), input_matrix(), dt_fine_s)
+        pieces.append(simulate_zoh(F, G, u_fine[a:b], pieces[-1][-1])[1:])
+    return np.vstack(pieces)
 
 
 def flange_contact_step(x: np.ndarray, clearance_m: float) -> int:

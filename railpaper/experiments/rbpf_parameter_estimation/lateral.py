@@ -16,17 +16,20 @@ metrics and its timings; the metrics of a stack of runs are :func:`lateral_metri
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from railpaper import track
-from railpaper.data import load_quantities
-from railpaper.discretise import zoh
 from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.rbpf import FilterRun, run_rbpf
 from railpaper.estimators.ekf import run_augmented_ekf
+from railpaper.experiments.lateral_vehicle import (  # noqa: F401 (the chapter's API)
+    filter_noise,
+    filter_system,
+    noise_std,
+    simulate_lateral,
+    vehicle,
+)
 from railpaper.experiments.rbpf_parameter_estimation import posterior
 from railpaper.experiments.rbpf_parameter_estimation.measurements import (
     read_measurements,
@@ -36,52 +39,11 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRecord,
     LateralRun,
 )
-from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
 from railpaper.models import lateral_16state as L
-from railpaper.paths import DATA_DIR
 from railpaper.settling import holds_from, settling_step
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
 
 WITHIN = 0.05
-
-
-def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
-    """Fixed quantities and true θ from ``data/rbpf-parameter-estimation/parameters.toml``."""
-    q = load_quantities(params_path or DATA_DIR / SPEC.name / "parameters.toml",
-                        L.FIXED_KEYS + L.PARAM_NAMES)
-    return {k: q[k].value for k in L.FIXED_KEYS}, np.array([q[k].value for k in L.PARAM_NAMES])
-
-
-# ----------------------------------------------------------------------------- Part 2: lateral
-def noise_std(p: dict) -> np.ndarray:
-    """Sensor noise std of the five channels (:data:`L.CHANNELS`): m/s², m/s², m/s², m/s², rad/s."""
-    return np.array([p["noise_acc_wheelset_mps2"]] * 2 + [p["noise_acc_bogie_mps2"],
-                    p["noise_acc_body_mps2"], p["noise_yawrate_radps"]])
-
-
-def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
-    """One record: an alignment profile of ``spectrum`` (seed ``seed``), the vehicle simulated
-    exactly at ``dt_s / truth_substeps``, the five channels sampled at ``dt_s`` with white sensor
-    noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
-    v = p["speed_kmh"] / 3.6
-    dtf = p["dt_s"] / p["truth_substeps"]
-    dur = p["n_steps"] * p["dt_s"]
-    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * p["wavelength_max_m"])
-    dx = min(0.05, p["wavelength_min_m"] / 2)
-    s, z = track.synthesize_profile(p["spectrum"], "alignment", length, dx, seed=seed,
-                                    wavelength_min_m=p["wavelength_min_m"],
-                                    wavelength_max_m=p["wavelength_max_m"])
-    _, _, dq = track.wheelset_inputs(s, z, v, [0.0, 2 * fixed["a"]], dtf, dur, derivative=True)
-    x = L.simulate_truth(fixed, theta, v, dtf, dq[:-1])
-    sub = p["truth_substeps"]
-    H = L.measurement_matrix(L.build_A_direct(fixed, theta, v))
-    rng = np.random.default_rng([seed, 7])
-    y = x[sub::sub][:p["n_steps"]] @ H.T
-    y = y + rng.standard_normal(y.shape) * noise_std(p)
-    u = dq[0:-1:sub][:p["n_steps"]]                       # u_k = ẏt(t_{k-1}), held over the step
-    du = np.diff(dq[::sub], axis=0)
-    return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
-                         u_var_m2ps2=dq.var(axis=0))
 
 
 def lateral_record(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
@@ -90,22 +52,6 @@ def lateral_record(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> Latera
     if p["measurements_csv"]:
         return read_measurements(p["measurements_csv"], p)
     return simulate_lateral(p, fixed, theta, seed)
-
-
-def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
-    """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
-    _, G = zoh(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6), L.input_matrix(), p["dt_s"])
-    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
-    return Q, np.diag(noise_std(p) ** 2)
-
-
-def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord):
-    """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
-    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`);
-    the ZOH's balancing is that of the prior box's centre (it changes only the rounding)."""
-    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
-    centre = theta * 0.5 * (p["prior_low"] + p["prior_high"])       # balancing only
-    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=centre)
 
 
 def lateral_rbpf(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int,

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.base import ChapterResult
+from railpaper.experiments.lateral_vehicle import LateralRecord
 
 
 # ----------------------------------------------------------------------------- exact posterior
@@ -167,33 +168,6 @@ class ToyPart:
 
 
 # ----------------------------------------------------------------------------- Part 2: lateral
-@dataclass(frozen=True)
-class LateralRecord:
-    """One lateral record: what the filters are given.
-
-    Attributes
-    ----------
-    seed : int or None
-        Seed of the simulated record (track profile and sensor noise); None for a user's file.
-    y : ndarray, shape (K, 5)
-        Measurements at steps 1..K: lateral accelerations of wheelsets 1, 2, the bogie and the
-        car body (m/s²) and the bogie yaw rate (rad/s) (:data:`lateral_16state.CHANNELS`).
-    u_mps : ndarray, shape (K, 2) or None
-        Track lateral velocity under wheelsets 1 and 2 (m/s), held over each filter step
-        (``u_k`` = value at step k − 1); None when a user's file has none.
-    du_var_m2ps2 : ndarray, shape (2,)
-        Variance of the input's change over one filter step, (m/s)²: the filters' process noise.
-    u_var_m2ps2 : ndarray, shape (2,)
-        Variance of the input itself, (m/s)²: the process noise when the input is not known.
-    """
-
-    seed: int | None
-    y: np.ndarray
-    u_mps: np.ndarray | None
-    du_var_m2ps2: np.ndarray
-    u_var_m2ps2: np.ndarray
-
-
 @dataclass(frozen=True)
 class LateralRun:
     """Every estimator on one lateral record; estimates normalised by the true values.

@@ -1,0 +1,133 @@
+"""The lateral vehicle of paper 003 as the chapters simulate and filter it, shared by chapter
+``rbpf-parameter-estimation`` and the fault-detection appendix (chapters never import each
+other).
+
+The vehicle's data are ``data/rbpf-parameter-estimation/parameters.toml``; a record
+(:class:`LateralRecord`) is an alignment profile driven through the 16-state model
+(:mod:`railpaper.models.lateral_16state`) simulated exactly on a fine grid, sampled at ``dt_s``
+with white sensor noise; the filters' model is the exact ZOH of A(θ) at ``dt_s``
+(:func:`filter_system`).  The parameter dictionary ``p`` carries the record's settings under the
+names of chapter 003's :data:`SPEC` (``speed_kmh``, ``dt_s``, ``truth_substeps``, ``n_steps``,
+``spectrum``, ``wavelength_min_m``, ``wavelength_max_m`` and the four ``noise_*``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from railpaper import track
+from railpaper.data import load_quantities
+from railpaper.discretise import zoh
+from railpaper.models import lateral_16state as L
+from railpaper.paths import DATA_DIR
+
+#: The vehicle's data (paper 003 prints none: a project choice, sources in the file).
+VEHICLE_FILE = DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml"
+
+
+@dataclass(frozen=True)
+class LateralRecord:
+    """One lateral record: what the filters are given.
+
+    Attributes
+    ----------
+    seed : int or None
+        Seed of the simulated record (track profile and sensor noise); None for a user's file.
+    y : ndarray, shape (K, 5)
+        Measurements at steps 1..K: lateral accelerations of wheelsets 1, 2, the bogie and the
+        car body (m/s²) and the bogie yaw rate (rad/s) (:data:`lateral_16state.CHANNELS`).
+    u_mps : ndarray, shape (K, 2) or None
+        Track lateral velocity under wheelsets 1 and 2 (m/s), held over each filter step
+        (``u_k`` = value at step k − 1); None when a user's file has none.
+    du_var_m2ps2 : ndarray, shape (2,)
+        Variance of the input's change over one filter step, (m/s)²: the filters' process noise.
+    u_var_m2ps2 : ndarray, shape (2,)
+        Variance of the input itself, (m/s)²: the process noise when the input is not known.
+    """
+
+    seed: int | None
+    y: np.ndarray
+    u_mps: np.ndarray | None
+    du_var_m2ps2: np.ndarray
+    u_var_m2ps2: np.ndarray
+
+
+def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
+    """Fixed quantities and true θ from ``data/rbpf-parameter-estimation/parameters.toml``."""
+    q = load_quantities(params_path or VEHICLE_FILE, L.FIXED_KEYS + L.PARAM_NAMES)
+    return {k: q[k].value for k in L.FIXED_KEYS}, np.array([q[k].value for k in L.PARAM_NAMES])
+
+
+def noise_std(p: dict) -> np.ndarray:
+    """Sensor noise std of the five channels (:data:`L.CHANNELS`): m/s², m/s², m/s², m/s², rad/s."""
+    return np.array([p["noise_acc_wheelset_mps2"]] * 2 + [p["noise_acc_bogie_mps2"],
+                    p["noise_acc_body_mps2"], p["noise_yawrate_radps"]])
+
+
+def track_velocity(p: dict, fixed: dict, seed: int) -> np.ndarray:
+    """Track lateral velocity under both wheelsets on the fine grid, (K_fine + 1, 2) m/s: an
+    alignment profile of ``spectrum`` (seed ``seed``) long enough for ``n_steps`` at ``dt_s``."""
+    v = p["speed_kmh"] / 3.6
+    dtf = p["dt_s"] / p["truth_substeps"]
+    dur = p["n_steps"] * p["dt_s"]
+    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * p["wavelength_max_m"])
+    dx = min(0.05, p["wavelength_min_m"] / 2)
+    s, z = track.synthesize_profile(p["spectrum"], "alignment", length, dx, seed=seed,
+                                    wavelength_min_m=p["wavelength_min_m"],
+                                    wavelength_max_m=p["wavelength_max_m"])
+    _, _, dq = track.wheelset_inputs(s, z, v, [0.0, 2 * fixed["a"]], dtf, dur, derivative=True)
+    return dq
+
+
+def sampled_record(p: dict, seed: int, states: np.ndarray, H: np.ndarray, dq: np.ndarray
+                   ) -> LateralRecord:
+    """The record the filters see: fine-grid ``states`` (K_fine + 1, 16) sampled every
+    ``truth_substeps`` and read through ``H`` ((5, 16), or (n_steps, 5, 16) when the
+    measurement changes with θ over the record), white sensor noise (generator ``[seed, 7]``),
+    and the input u_k = ẏ_t(t_{k−1}) held over a step."""
+    sub = p["truth_substeps"]
+    rng = np.random.default_rng([seed, 7])
+    x = states[sub::sub][:p["n_steps"]]
+    y = x @ H.T if H.ndim == 2 else np.einsum("kij,kj->ki", H[:len(x)], x)
+    y = y + rng.standard_normal(y.shape) * noise_std(p)
+    u = dq[0:-1:sub][:p["n_steps"]]                       # u_k = ẏt(t_{k-1}), held over the step
+    du = np.diff(dq[::sub], axis=0)
+    return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
+                         u_var_m2ps2=dq.var(axis=0))
+
+
+def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+    """One record: an alignment profile of ``spectrum`` (seed ``seed``), the vehicle simulated
+    exactly at ``dt_s / truth_substeps``, the five channels sampled at ``dt_s`` with white sensor
+    noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
+    v = p["speed_kmh"] / 3.6
+    dq = track_velocity(p, fixed, seed)
+    x = L.simulate_truth(fixed, theta, v, p["dt_s"] / p["truth_substeps"], dq[:-1])
+    H = L.measurement_matrix(L.build_A_direct(fixed, theta, v))
+    return sampled_record(p, seed, x, H, dq)
+
+
+def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
+    """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
+    _, G = zoh(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6), L.input_matrix(), p["dt_s"])
+    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
+    return Q, np.diag(noise_std(p) ** 2)
+
+
+def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord,
+                  theta_ref: np.ndarray | None = None):
+    """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
+    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`);
+    the ZOH's balancing is that of ``theta_ref`` (default: the centre of chapter 003's prior box
+    ``prior_low``..``prior_high``; it changes only the rounding)."""
+    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
+    if theta_ref is None:
+        theta_ref = theta * 0.5 * (p["prior_low"] + p["prior_high"])       # balancing only
+    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=theta_ref)
+
+
+__all__ = ["LateralRecord", "VEHICLE_FILE", "filter_noise", "filter_system", "noise_std",
+           "sampled_record", "simulate_lateral", "track_velocity", "vehicle"]
