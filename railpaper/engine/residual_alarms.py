@@ -42,7 +42,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from railpaper.engine.kalman import innovation, predict, update
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 
 
@@ -72,13 +71,27 @@ def whitened_innovations(system: LinearGaussianBatch, y: np.ndarray, x0: np.ndar
             raise ValueError(f"whitened_innovations: one nominal model is needed, "
                              f"got {name} of shape {getattr(system, name).shape}")
     y = np.asarray(y, float)
-    x, P = np.asarray(x0, float), np.asarray(P0, float)
+    F, Q, H, R = system.F, system.Q, system.H, system.R
+    Bu = (np.zeros((len(y), F.shape[0])) if u is None or system.B is None
+          else np.asarray(u, float) @ system.B.T)                 # B u_k, every step at once
+    x, P = np.asarray(x0, float).copy(), np.asarray(P0, float).copy()
+    identity = np.eye(F.shape[0])
     z, log_lik = np.empty(y.shape), np.empty(len(y))
+    log_2pi = y.shape[1] * np.log(2.0 * np.pi)
     for k in range(len(y)):
-        x, P = predict(x, P, system.F, system.Q, system.B, None if u is None else u[k])
-        log_lik[k], v, _, L = innovation(x, P, y[k], system.H, system.R)
+        x = F @ x + Bu[k]                                     # x⁻ = F x + B u
+        P = F @ P @ F.T + Q                                   # P⁻ = F P Fᵀ + Q
+        v = y[k] - H @ x                                      # innovation
+        PHt = P @ H.T
+        S = H @ PHt + R                                       # S = H P⁻ Hᵀ + R
+        L = np.linalg.cholesky(S)                             # S = L Lᵀ
         z[k] = np.linalg.solve(L, v)                          # z = L⁻¹ v
-        x, P, _, _, _ = update(x, P, y[k], system.H, system.R)  # Joseph form
+        log_lik[k] = -0.5 * (z[k] @ z[k] + log_2pi) - np.log(np.diag(L)).sum()
+        K = np.linalg.solve(S, PHt.T).T                       # K = P⁻ Hᵀ S⁻¹
+        x = x + K @ v
+        A = identity - K @ H                                  # Joseph form:
+        P = A @ P @ A.T + K @ R @ K.T                         # P = A P⁻ Aᵀ + K R Kᵀ
+        P = 0.5 * (P + P.T)
     return Innovations(z=z, log_likelihood=log_lik)
 
 
