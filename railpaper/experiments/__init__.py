@@ -1,7 +1,8 @@
 """Experiments: one module per chapter, the whole computation as a function of its parameters.
 
 Every chapter module defines ``SPEC`` (a :class:`railpaper.experiments.base.ChapterSpec`) and a
-function ``run(**parameters) -> ChapterResult``.  The registry below maps chapter names to
+function ``run(**parameters) -> ChapterResult``.  A chapter whose ``SPEC.paper`` is empty is an
+appendix chapter of our own (no paper, no claims ledger: findings instead).  The registry below maps chapter names to
 module paths; modules are imported lazily so that a CLI call does not import cvxpy for a chapter
 that does not need it.
 """
@@ -16,6 +17,7 @@ CHAPTER_MODULES = {
     "partial-state-observer": "railpaper.experiments.partial_state_observer",
     "rbpf-parameter-estimation": "railpaper.experiments.rbpf_parameter_estimation",
     "quasi-gaussian-rbpf": "railpaper.experiments.quasi_gaussian_rbpf",
+    "suspension-fault-detection": "railpaper.experiments.suspension_fault_detection",
 }
 
 

@@ -21,11 +21,30 @@ import numpy as np
 from railpaper import track
 from railpaper.data import load_quantities
 from railpaper.discretise import zoh
+from railpaper.experiments.base import Parameter
 from railpaper.models import lateral_16state as L
 from railpaper.paths import DATA_DIR
 
 #: The vehicle's data (paper 003 prints none: a project choice, sources in the file).
 VEHICLE_FILE = DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml"
+
+#: The chapter parameters of a record's track and sensors (chapter 003's defaults), shared by
+#: the chapters that simulate this vehicle.
+P = Parameter
+TRACK_AND_SENSORS = [
+    P("spectrum", "german-low", "str", "alignment irregularity spectrum: fra-1 to fra-6, "
+      "german-low, german-high or china-hsr"),
+    P("wavelength_min_m", 1.0, "float", "shortest irregularity wavelength, m", positive=True),
+    P("wavelength_max_m", 100.0, "float", "longest irregularity wavelength, m", positive=True),
+    P("noise_acc_wheelset_mps2", 0.1, "float", "wheelset accelerometer noise std, m/s^2",
+      positive=True),
+    P("noise_acc_bogie_mps2", 0.1, "float", "bogie accelerometer noise std, m/s^2",
+      positive=True),
+    P("noise_acc_body_mps2", 0.01, "float", "car-body accelerometer noise std, m/s^2",
+      positive=True),
+    P("noise_yawrate_radps", 0.001, "float", "bogie yaw-rate gyro noise std, rad/s",
+      positive=True),
+]
 
 
 @dataclass(frozen=True)
@@ -129,5 +148,5 @@ def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord
     return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=theta_ref)
 
 
-__all__ = ["LateralRecord", "VEHICLE_FILE", "filter_noise", "filter_system", "noise_std",
+__all__ = ["LateralRecord", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise", "filter_system", "noise_std",
            "sampled_record", "simulate_lateral", "track_velocity", "vehicle"]

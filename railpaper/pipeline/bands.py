@@ -21,6 +21,7 @@ from pathlib import Path
 from railpaper.data import read_toml
 from railpaper.pipeline.chapters import chapter_spec, run_chapter
 from railpaper.pipeline.claim_rules import condition_thresholds, rule_metrics
+from railpaper.pipeline.findings import read_findings
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 DEFAULT_STRIDE = 1000
@@ -35,8 +36,14 @@ FLOOR_NOTE = "at least ±max(1e-9, 1e-9·|value|) for rounding on another CPU"
 
 
 def rule_thresholds(chapter: str) -> dict[str, list[float]]:
-    """``{metric: [thresholds]}``: the constants a claim rule compares each metric with."""
+    """``{metric: [thresholds]}``: the constants a claim rule compares each metric with (for a
+    chapter of our own: each finding's threshold, for both ends of its interval)."""
     out: dict[str, list[float]] = {}
+    if not chapter_spec(chapter).paper:
+        for row in read_findings(chapter).values():
+            for metric in row["interval"]:
+                out.setdefault(metric, []).append(float(row["threshold"]))
+        return out
     for row in claims(chapter).values():
         for case in row.get("cases", []):
             for cond in case.get("when", []):
@@ -133,7 +140,8 @@ def compute_bands(chapter: str, quick: bool, batches: int = 10, stride: int = DE
                   work_dir: str | Path | None = None, metrics: list[str] | None = None,
                   widen: float = 0.25) -> dict[str, tuple[float, float, str]]:
     """Bands of ``metrics`` (default: every metric a claim rule reads, and every metric already
-    banded for this mode) from ``batches`` chapter runs with seeds 0, stride, 2·stride, …"""
+    banded for this mode; for a chapter of our own, every metric of the run) from ``batches``
+    chapter runs with seeds 0, stride, 2·stride, …"""
     if batches < 2:
         raise ValueError(f"bands need at least 2 batches, got {batches}")
     mode = "quick" if quick else "full"
@@ -141,15 +149,17 @@ def compute_bands(chapter: str, quick: bool, batches: int = 10, stride: int = DE
     if metrics is None:
         tolerances = read_toml(chapter_data_dir(chapter) / "tolerances.toml").get(mode, {})
         metrics = list(tolerances)
-        for row in claims(chapter).values():
+        for row in claims(chapter).values() if chapter_spec(chapter).paper else ():
             metrics += rule_metrics(row)
-        metrics = list(dict.fromkeys(metrics))
     seeds = [k * stride for k in range(batches)]
     runs = []
     for i, seed in enumerate(seeds):
         print(f"railpaper: bands of {chapter} ({mode}): batch {i + 1}/{batches}, seed {seed}",
               file=sys.stderr, flush=True)
         runs.append(_batch_metrics(chapter, quick, seed, work))
+    if not chapter_spec(chapter).paper and not list(metrics):
+        metrics = sorted(runs[0])                   # a chapter of our own: every metric
+    metrics = list(dict.fromkeys(metrics))
     thresholds = rule_thresholds(chapter)
     out = {}
     seed_text = f"{batches} disjoint seed batches (seed = {seeds[0]}, {seeds[1]}, …, {seeds[-1]})"

@@ -16,6 +16,7 @@ from railpaper.pipeline.chapters import (
     PipelineError,
     book_chapters,
     chapter_spec,
+    paper_chapters,
     run_chapter,
 )
 from railpaper.pipeline.ledger import write_ledger
@@ -27,13 +28,19 @@ KEY_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "control", "filterpy", "n
 
 
 def write_toc(book_dir: Path, chapters: list[str]) -> Path:
-    """Write ``_toc.yml``: introduction, the chapters numbered in book order, then the appendix
-    pages that exist (unnumbered)."""
+    """Write ``_toc.yml``: introduction, the papers' chapters numbered in book order, the
+    chapters of our own (no paper) under "Beyond the papers", then the appendix pages that
+    exist (unnumbered)."""
     lines = ["format: jb-book", "root: intro", "parts:", "- caption: Chapters", "  numbered: true",
              "  chapters:"]
-    for name in chapters:
+    ours = [name for name in chapters if not chapter_spec(name).paper]
+    for name in [name for name in chapters if name not in ours]:
         stem = Path(chapter_spec(name).notebook).stem
         lines.append(f"  - file: chapters/{name}/{stem}")
+    if ours:
+        lines += ["- caption: Beyond the papers", "  chapters:"]
+        lines += [f"  - file: chapters/{name}/{Path(chapter_spec(name).notebook).stem}"
+                  for name in ours]
     appendix = [page for page in APPENDIX_PAGES if (book_dir / f"{page}.md").exists()]
     if appendix:
         lines += ["- caption: Appendix", "  chapters:"]
@@ -96,7 +103,7 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
             print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}",
                   file=sys.stderr)
             run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
-    write_ledger(book, chapters)
+    write_ledger(book, [name for name in chapters if name in paper_chapters()])
     write_environment(book)
     if (book / "performance.md").exists():
         print("railpaper: engine benchmark (quick) for the performance page", file=sys.stderr)

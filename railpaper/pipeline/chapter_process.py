@@ -24,7 +24,7 @@ from railpaper.pipeline.chapters import PipelineError, ensure_kernel, run_chapte
 #: Chapters by their default run's wall time on one core, longest first (measured 2026-12-04 in
 #: a two-job build: 548 s, 502 s, 104 s, 46 s); a chapter not listed starts last.
 LONGEST_FIRST = ("rbpf-parameter-estimation", "quasi-gaussian-rbpf", "reduced-order-observer",
-                 "partial-state-observer")
+                 "suspension-fault-detection", "partial-state-observer")
 
 #: Set for the chapters of a build that runs several at once: a chapter's Monte Carlo sweep
 #: (:func:`railpaper.pipeline.sweep.notebook_sweep`) then uses one worker process, the one core

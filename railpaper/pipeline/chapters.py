@@ -55,6 +55,12 @@ def book_chapters() -> list[str]:
             if (NOTEBOOK_DIR / load_chapter(name).SPEC.notebook).exists()]
 
 
+def paper_chapters() -> list[str]:
+    """The book's chapters that rebuild a paper (each with a claims ledger), in book order; the
+    others (``SPEC.paper`` empty) are studies of our own with findings instead of claims."""
+    return [name for name in book_chapters() if chapter_spec(name).paper]
+
+
 def default_output_dir(name: str) -> Path:
     """Where the book takes a chapter's executed notebook and outputs from."""
     return BOOK_DIR / "chapters" / name

@@ -26,6 +26,7 @@ from pathlib import Path
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.chapters import chapter_spec, default_output_dir
 from railpaper.pipeline.claim_rules import rule_metrics
+from railpaper.pipeline.findings import read_findings
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 
@@ -59,6 +60,11 @@ def load_tolerances(chapter: str) -> dict:
 
 def _claims_by_metric(chapter: str) -> dict[str, str]:
     out = {}
+    if not chapter_spec(chapter).paper:                  # a chapter of our own: its findings
+        for key, row in read_findings(chapter).items():
+            for metric in [row["metric"], *row["interval"]]:
+                out.setdefault(metric, f"finding '{key}'")
+        return out
     for table in claims(chapter).values():
         text = table.get("claim", "")
         if table.get("reading"):

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from railpaper.experiments import load_chapter
-from railpaper.pipeline.chapters import book_chapters
+from railpaper.pipeline.chapters import book_chapters, paper_chapters
 
 pytestmark = pytest.mark.slow
 CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -73,7 +73,7 @@ def test_chapter_claims_equal_the_intro_ledger(built_book):
     """Each chapter's claims section shows exactly its rows of the intro's ledger."""
     intro = ledger_rows((built_book / "intro.html").read_text())
     chapters = []
-    for chapter in book_chapters():
+    for chapter in paper_chapters():
         stem = Path(load_chapter(chapter).SPEC.notebook).stem
         rows = ledger_rows((built_book / "chapters" / chapter / f"{stem}.html").read_text())
         assert rows, f"{chapter}: no ledger rows on the chapter page"
@@ -105,7 +105,7 @@ def test_no_decided_verdict_while_its_interval_straddles_a_threshold(built_book)
     from railpaper.pipeline.outputs import claims
     book = built_book.parent.parent
     problems, checked = [], 0
-    for row in build_ledger(book_chapters(), book / "chapters"):
+    for row in build_ledger(paper_chapters(), book / "chapters"):
         if row.verdict not in DECIDED_VERDICTS:
             continue
         rule = claims(row.chapter)[row.key]

@@ -5,7 +5,7 @@ verdict rests on fewer Monte Carlo samples than the chapter promises (>= 20 full
 import pytest
 
 from railpaper.data import read_toml
-from railpaper.pipeline.chapters import book_chapters
+from railpaper.pipeline.chapters import paper_chapters
 from railpaper.pipeline.check import load_tolerances
 from railpaper.pipeline.claim_rules import (
     is_untestable,
@@ -22,7 +22,7 @@ def _rows(chapter):
 
 
 @pytest.mark.parametrize("mode", ["full", "quick"])
-@pytest.mark.parametrize("chapter", book_chapters())
+@pytest.mark.parametrize("chapter", paper_chapters())
 def test_bands_decide_every_verdict(chapter, mode):
     bands = {m: (lo, hi) for m, (lo, hi, _) in load_tolerances(chapter)[mode].items()}
     problems = []

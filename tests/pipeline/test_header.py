@@ -7,7 +7,7 @@ import shlex
 import pytest
 
 from railpaper.cli import build_parser
-from railpaper.pipeline.chapters import book_chapters, chapter_spec
+from railpaper.pipeline.chapters import book_chapters, chapter_spec, paper_chapters
 from railpaper.pipeline.header import (
     CHAPTER_REFERENCES,
     bib_entries,
@@ -17,7 +17,7 @@ from railpaper.pipeline.header import (
 )
 
 
-@pytest.mark.parametrize("chapter", book_chapters())
+@pytest.mark.parametrize("chapter", paper_chapters())
 def test_every_chapter_has_a_reference_with_title_and_year(chapter):
     entry = bib_entries()[CHAPTER_REFERENCES[chapter]]
     text = reference_markdown(chapter)

@@ -7,6 +7,7 @@ that the chapter's computation stays short; every name, default, quick value and
 from __future__ import annotations
 
 from railpaper.experiments.base import ChapterSpec, Parameter
+from railpaper.experiments.lateral_vehicle import TRACK_AND_SENSORS
 
 P = Parameter
 SPEC = ChapterSpec(
@@ -48,18 +49,7 @@ SPEC = ChapterSpec(
         P("dt_s", 0.001, "float", "filter sample time, s", positive=True),
         P("truth_substeps", 10, "int", "truth steps per filter step (truth dt = dt_s / this)",
           minimum=1),
-        P("spectrum", "german-low", "str", "alignment irregularity spectrum: fra-1 to fra-6, "
-          "german-low, german-high or china-hsr"),
-        P("wavelength_min_m", 1.0, "float", "shortest irregularity wavelength, m", positive=True),
-        P("wavelength_max_m", 100.0, "float", "longest irregularity wavelength, m", positive=True),
-        P("noise_acc_wheelset_mps2", 0.1, "float", "wheelset accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_acc_bogie_mps2", 0.1, "float", "bogie accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_acc_body_mps2", 0.01, "float", "car-body accelerometer noise std, m/s^2",
-          positive=True),
-        P("noise_yawrate_radps", 0.001, "float", "bogie yaw-rate gyro noise std, rad/s",
-          positive=True),
+        *TRACK_AND_SENSORS,
         P("n_particles", 200, "int", "RBPF particles (lateral)", minimum=2),
         P("prior_low", 0.5, "float", "prior box lower edge, fraction of the true value",
           positive=True),

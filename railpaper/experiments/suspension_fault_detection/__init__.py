@@ -1,0 +1,13 @@
+"""Appendix ``suspension-fault-detection`` (no paper: our study on paper 003's lateral vehicle):
+how soon a failed anti-yaw damper or a softened secondary spring shows in the data, by the
+residual test, paper 003's RBPF and the exact change posterior.
+
+``SPEC``, ``validate(params)`` and ``run(quick=False, progress=None, **params)`` are what the
+pipeline needs; the package's modules are the appendix's parts (``experiment`` is the whole
+computation, ``figures`` and ``tables`` draw from its result).
+"""
+
+from railpaper.experiments.suspension_fault_detection.experiment import run, validate
+from railpaper.experiments.suspension_fault_detection.spec import SPEC
+
+__all__ = ["SPEC", "run", "validate"]

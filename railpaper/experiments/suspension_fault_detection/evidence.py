@@ -1,0 +1,210 @@
+"""From every record's statistics to the appendix's evidence: thresholds at one false-alarm
+probability, alarms, delays, detection rates, false alarms per hour, post-fault estimates and
+ROC curves — each with its 95 % interval over records.
+
+Definitions (times in s from the record's start):
+
+* *monitoring window*: from ``monitor_from_s`` (the prior's first fault time) to the record's
+  end; an alarm is the first sample in it whose statistic reaches the threshold;
+* *threshold*: each detector's, per speed, is set on the calibration records (fault-free) so
+  that at most a fraction ``false_alarm_probability`` of them alarm in their window;
+* *false alarms per hour*: the evaluation records' (other fault-free records) alarm rate per
+  window, times 3600 / window length — the rate of rare, independent alarms;
+* *delay*: alarm time − fault time for a record without an alarm before its fault; a record
+  that is never alarmed (or cut at flange contact first) has an infinite delay, so the median
+  is censored (−1: beyond the record) where fewer than half the records are alarmed;
+* *detected within d*: the alarm falls in (τ, τ + d]; a record alarmed before its fault, never,
+  or cut at flange contact before τ + d without an alarm is not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from railpaper.experiments.suspension_fault_detection.result import RecordRun
+from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S
+from railpaper.stats import median_interval, quantile_ranks, rate
+
+#: Points of each ROC curve (thresholds), at most.
+ROC_POINTS = 60
+
+
+def speed_key(speed_kmh: float) -> str:
+    """``300kmh`` for 300.0: the speed as it appears in metric names."""
+    return f"{speed_kmh:g}kmh"
+
+
+def window_rows(dt_s: float, monitor_from_s: float) -> int:
+    """First row (0-based) of the monitoring window: the sample at ``monitor_from_s``."""
+    return max(int(round(monitor_from_s / dt_s)) - 1, 0)
+
+
+def window_max(statistic: np.ndarray, first_row: int) -> float:
+    """Largest statistic in the monitoring window (−inf when the record ends before it)."""
+    tail = statistic[first_row:]
+    return float(tail.max()) if tail.size else -np.inf
+
+
+def threshold(maxima: np.ndarray, false_alarm_probability: float) -> float:
+    """Smallest threshold at which at most ``false_alarm_probability`` of the calibration
+    records' window maxima reach it: just above the (⌊α n⌋ + 1)-th largest."""
+    ordered = np.sort(np.asarray(maxima, float))[::-1]
+    allowed = int(np.floor(false_alarm_probability * ordered.size))
+    if allowed >= ordered.size:
+        return -np.inf
+    return float(np.nextafter(ordered[allowed], np.inf))
+
+
+def alarm_time_s(statistic: np.ndarray, h: float, first_row: int, dt_s: float) -> float:
+    """Time of the first sample in the window at or above ``h`` (inf: none)."""
+    hits = np.flatnonzero(statistic[first_row:] >= h)
+    return float((first_row + hits[0] + 1) * dt_s) if hits.size else np.inf
+
+
+def censored_median(delays) -> tuple[float, float, float]:
+    """Median of delays that may be infinite (never alarmed) and its distribution-free 95 %
+    interval [x_(l), x_(u)] (:func:`railpaper.stats.quantile_ranks`; order statistics stay valid
+    under censoring); an infinite value is reported as −1 ("beyond the record")."""
+    x = np.sort(np.asarray(delays, float))
+    n = x.size
+    low, high = quantile_ranks(n, 0.5)
+    med = x[(n - 1) // 2] if n % 2 else 0.5 * (x[n // 2 - 1] + x[n // 2])
+    return tuple(float(v) if np.isfinite(v) else -1.0 for v in (med, x[low - 1], x[high - 1]))
+
+
+def detector_outcomes(runs: list[RecordRun], detector: str, h: float, first_row: int,
+                      dt_s: float) -> pd.DataFrame:
+    """Per faulty record: alarm time, whether it came before the fault, the delay (inf: never
+    after the fault), the window maxima before the fault and within 1 s after it."""
+    rows = []
+    for r in runs:
+        s = r.statistics[detector]
+        t = alarm_time_s(s, h, first_row, dt_s)
+        fault_row = int(round(r.fault_time_s / dt_s))             # first post-fault row
+        early = t <= r.fault_time_s
+        one_s = fault_row + int(round(1.0 / dt_s))
+        rows.append({"seed": r.seed, "alarm_s": t, "early": early,
+                     "delay_s": np.inf if early else t - r.fault_time_s,
+                     "pre_max": window_max(s[:fault_row], first_row),
+                     "post_max_1s": float(s[fault_row:one_s].max()) if s[fault_row:one_s].size
+                     else -np.inf,
+                     "end_s": r.end_s, "flange_contact": r.flange_contact})
+    return pd.DataFrame(rows)
+
+
+def false_alarm_metrics(runs: list[RecordRun], detector: str, h: float, first_row: int,
+                        window_s: float, tag: str) -> dict:
+    """False alarms per hour on the evaluation records, with the Clopper–Pearson interval."""
+    maxima = np.array([window_max(r.statistics[detector], first_row) for r in runs])
+    est = rate(maxima >= h)
+    per_hour = 3600.0 / window_s
+    return {f"false_alarms_per_hour_{tag}": est.value * per_hour,
+            f"false_alarms_per_hour_{tag}_low": est.low * per_hour,
+            f"false_alarms_per_hour_{tag}_high": est.high * per_hour,
+            f"false_alarms_per_hour_{tag}_n": est.n}
+
+
+def fault_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
+    """Detection within each horizon, early alarms and the median delay of one detector on one
+    fault's records."""
+    m = {}
+    delay = outcomes["delay_s"].to_numpy()
+    for d in WITHIN_S:
+        est = rate(delay <= d + 1e-9)
+        key = f"detected_within_{d:g}s_{tag}"
+        m.update({key: est.value, f"{key}_low": est.low, f"{key}_high": est.high,
+                  f"{key}_n": est.n})
+    early = rate(outcomes["early"].to_numpy())
+    m.update({f"alarm_before_fault_{tag}": early.value, f"alarm_before_fault_{tag}_low": early.low,
+              f"alarm_before_fault_{tag}_high": early.high})
+    med, low, high = censored_median(delay)
+    m.update({f"delay_median_s_{tag}": med, f"delay_median_s_{tag}_low": low,
+              f"delay_median_s_{tag}_high": high, f"delay_median_s_{tag}_n": len(delay)})
+    return m
+
+
+def estimate_metrics(runs: list[RecordRun], detector: str, tag: str) -> dict:
+    """Median |post-fault estimate − truth| (fraction of nominal) over the fault's records."""
+    errors = np.array([abs(r.post_fault_estimate[detector] - r.true_factor_end) for r in runs
+                       if detector in r.post_fault_estimate])
+    if errors.size < 2:
+        return {}
+    est = median_interval(errors)
+    key = f"post_fault_error_{tag}"
+    return {key: est.value, f"{key}_low": est.low, f"{key}_high": est.high, f"{key}_n": est.n}
+
+
+def flange_metrics(runs: list[RecordRun], tag: str) -> dict:
+    """How often a fault's records reach flange contact, and how soon after the fault."""
+    hit = rate([r.flange_contact for r in runs])
+    m = {f"flange_contact_rate_{tag}": hit.value, f"flange_contact_rate_{tag}_low": hit.low,
+         f"flange_contact_rate_{tag}_high": hit.high, f"flange_contact_rate_{tag}_n": hit.n}
+    times = np.array([r.end_s - r.fault_time_s if r.flange_contact else np.inf for r in runs])
+    med, low, high = censored_median(times)
+    m.update({f"flange_contact_after_s_{tag}": med, f"flange_contact_after_s_{tag}_low": low,
+              f"flange_contact_after_s_{tag}_high": high})
+    return m
+
+
+def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
+             outcomes_of, detector: str, first_row: int, window_s: float) -> list[dict]:
+    """ROC points of one detector and speed: per fault, false alarms per hour on all the
+    fault-free records against detection within 1 s, over thresholds spanning the maxima."""
+    free = np.array([window_max(r.statistics[detector], first_row)
+                     for r in calibration + evaluation])
+    rows = []
+    for fault, outcomes in outcomes_of.items():
+        pre, post = outcomes["pre_max"].to_numpy(), outcomes["post_max_1s"].to_numpy()
+        levels = np.concatenate([free, post])
+        levels = np.unique(levels[np.isfinite(levels)])
+        if levels.size > ROC_POINTS:
+            levels = np.quantile(levels, np.linspace(0, 1, ROC_POINTS))
+        for h in np.concatenate([levels, [np.inf]]):
+            rows.append({"detector": detector, "fault": fault, "threshold": h,
+                         "false_alarms_per_hour": float(np.mean(free >= h)) * 3600 / window_s,
+                         "detected_within_1s": float(np.mean((pre < h) & (post >= h)))})
+    return rows
+
+
+def evidence(records: list[RecordRun], detectors: list[str], speeds: list[float],
+             faults: list[str], p: dict, dt_s: float, monitor_from_s: float
+             ) -> tuple[dict, dict, pd.DataFrame]:
+    """Thresholds, metrics and ROC points of every detector, speed and fault."""
+    first_row = window_rows(dt_s, monitor_from_s)
+    window_s = p["duration_s"] - monitor_from_s
+    metrics, thresholds, roc = {}, {}, []
+    for speed in speeds:
+        at = [r for r in records if r.speed_kmh == speed]
+        for fault in faults:
+            metrics.update(flange_metrics([r for r in at if r.fault == fault],
+                                          f"{fault}_{speed_key(speed)}"))
+        for detector in detectors:
+            have = [r for r in at if detector in r.statistics]
+            calibration = [r for r in have if r.role == "calibration"]
+            evaluation = [r for r in have if r.role == "evaluation"]
+            if not calibration or not evaluation:
+                continue
+            h = threshold([window_max(r.statistics[detector], first_row) for r in calibration],
+                          p["false_alarm_probability"])
+            thresholds[(detector, speed)] = h
+            tag = f"{detector}_{speed_key(speed)}"
+            metrics[f"threshold_{tag}"] = h
+            metrics.update(false_alarm_metrics(evaluation, detector, h, first_row, window_s,
+                                               tag))
+            outcomes_of = {}
+            for fault in faults:
+                runs = [r for r in have if r.fault == fault]
+                if not runs:
+                    continue
+                outcomes_of[fault] = detector_outcomes(runs, detector, h, first_row, dt_s)
+                ftag = f"{detector}_{fault}_{speed_key(speed)}"
+                metrics.update(fault_metrics(outcomes_of[fault], ftag))
+                metrics.update(estimate_metrics(runs, detector, ftag))
+            for row in roc_rows(calibration, evaluation, outcomes_of, detector, first_row,
+                                window_s):
+                roc.append(dict(row, speed_kmh=speed))
+    return metrics, thresholds, pd.DataFrame(roc)
+
+
+__all__ = ["censored_median", "evidence", "speed_key", "threshold", "window_rows"]

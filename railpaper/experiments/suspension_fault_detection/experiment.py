@@ -1,0 +1,246 @@
+"""Appendix ``suspension-fault-detection``: how soon does a failed damper show in the data?
+
+The whole computation as a function of the parameters.  At every speed of ``speeds_kmh``:
+``records_per_fault`` records of each fault (:mod:`.faults`), the fault at a time drawn from the
+prior's grid (or ``fault_time_s``), and ``fault_free_records`` records without a fault (half set
+the thresholds, half count false alarms); on each, the residual CUSUM and the exact change
+posterior, and on the first ones at the first speed also paper 003's RBPF
+(:mod:`.detectors`).  :mod:`.evidence` turns the statistics into thresholds, delays, detection
+rates, false alarms per hour, post-fault estimates and ROC points.
+
+One record by hand::
+
+    fixed, theta = lateral_vehicle.vehicle()
+    catalogue, settings = faults.catalogue()
+    rec = records.simulate_faulted(params, settings, fixed, theta, catalogue["csaly_0"], 1.5,
+                                   300.0, seed=0)
+    system = lateral_vehicle.filter_system(records.record_parameters(params, 300.0), fixed,
+                                           theta, rec.record, theta_ref=theta)
+    g = detectors.residual_cusum(system, theta, rec.record, params["cusum_variance_ratio"])
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from railpaper.experiments.base import ParameterError, check_sample_time, default_progress
+from railpaper.experiments.lateral_vehicle import filter_system, vehicle
+from railpaper.experiments.suspension_fault_detection import detectors, faults, records
+from railpaper.experiments.suspension_fault_detection.evidence import evidence, speed_key
+from railpaper.experiments.suspension_fault_detection.result import (
+    NO_FAULT,
+    Fault,
+    FaultDetectionResult,
+    IllustratedRecord,
+    RecordRun,
+)
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
+from railpaper.models import lateral_16state as L
+from railpaper.track import SPECTRA
+
+#: Offsets of the fault-free records' seeds from ``seed`` (calibration, evaluation).
+FREE_SEED_OFFSETS = {"calibration": 300, "evaluation": 600}
+
+
+def chosen_faults(params: dict) -> list[Fault]:
+    """The run's faults: the catalogue's named in ``faults``, then the user's own."""
+    catalogue, _ = faults.catalogue()
+    names = [n.strip() for n in params["faults"].split(",") if n.strip()]
+    chosen = [catalogue[n] for n in names]
+    if params["extra_fault_parameter"]:
+        name, factor = params["extra_fault_parameter"], params["extra_fault_factor"]
+        chosen.append(Fault(name=f"{name}_x{factor:g}", parameter=name, factor=factor,
+                            kind="abrupt", label=f"{name} to {100 * factor:g} % (yours)"))
+    return chosen
+
+
+def validate(params: dict) -> None:
+    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
+    catalogue, settings = faults.catalogue()
+    names = [n.strip() for n in params["faults"].split(",") if n.strip()]
+    unknown = [n for n in names if n not in catalogue]
+    if unknown or not (names or params["extra_fault_parameter"]):
+        raise ParameterError(f"parameter 'faults': unknown fault '{unknown[0] if unknown else ''}'"
+                             f"; faults: {', '.join(catalogue)}")
+    extra = params["extra_fault_parameter"]
+    if extra and extra not in L.PARAM_NAMES:
+        raise ParameterError(f"parameter 'extra_fault_parameter': unknown parameter '{extra}'; "
+                             f"parameters: {', '.join(L.PARAM_NAMES)}")
+    if params["spectrum"] not in SPECTRA:
+        raise ParameterError(f"parameter 'spectrum': unknown spectrum '{params['spectrum']}'")
+    grid = faults.fault_times_s(settings)
+    if params["duration_s"] < grid[-1] + 2.0:
+        raise ParameterError(f"parameter 'duration_s' must be >= {grid[-1] + 2.0:g} s: the last "
+                             "fault time of the prior plus the 2 s of the longest horizon")
+    t = params["fault_time_s"]
+    if t != -1.0:
+        if not 0.0 < t < params["duration_s"]:
+            raise ParameterError(f"parameter 'fault_time_s' = {t:g} s lies outside the record "
+                                 f"(0 … {params['duration_s']:g} s)")
+        if np.min(np.abs(grid - t)) > 1e-9:
+            raise ParameterError(f"parameter 'fault_time_s' = {t:g} s is not on the prior's grid "
+                                 f"({grid[0]:g}, {grid[1]:g} … {grid[-1]:g} s)")
+    steps = grid / params["dt_s"]
+    if np.max(np.abs(steps - np.round(steps))) > 1e-6:
+        raise ParameterError(f"parameter 'dt_s' = {params['dt_s']:g} s must divide the fault "
+                             "times' grid spacing")
+    for key, most in (("records_per_fault", 300), ("fault_free_records", 600)):
+        if params[key] > most:
+            raise ParameterError(f"parameter '{key}' must be <= {most} (seed ranges), got "
+                                 f"{params[key]}")
+    if params["prior_low"] >= params["prior_high"]:
+        raise ParameterError("parameter 'prior_low' must be below 'prior_high'")
+    if not params["false_alarm_probability"] < 1:
+        raise ParameterError("parameter 'false_alarm_probability' must be < 1")
+    if not params["cusum_variance_ratio"] > 1:
+        raise ParameterError("parameter 'cusum_variance_ratio' must be > 1 (a growth)")
+    if not 0 < params["paper_delta"] < 1:
+        raise ParameterError("parameter 'paper_delta' must be in (0, 1)")
+    fixed, theta = vehicle()
+    for speed in params["speeds_kmh"]:
+        check_sample_time("dt_s", params["dt_s"], L.build_A_direct(fixed, theta, speed / 3.6),
+                          f"the lateral vehicle at {speed:g} km/h")
+
+
+def plan(params: dict, chosen: list[Fault]) -> list[tuple[str, str, int, bool]]:
+    """(fault, role, seed, with RBPF) of every record at one speed, in run order (the RBPF only
+    where the speed is the first)."""
+    items = []
+    for fault in chosen:
+        for i in range(params["records_per_fault"]):
+            items.append((fault.name, "fault", params["seed"] + i,
+                          i < params["rbpf_records_per_fault"]))
+    half = params["fault_free_records"] // 2
+    for role, offset in FREE_SEED_OFFSETS.items():
+        for i in range(half):
+            items.append((NO_FAULT, role, params["seed"] + offset + i,
+                          i < params["rbpf_fault_free_records"] // 2))
+    return items
+
+
+def fault_time(params: dict, grid_s: np.ndarray, seed: int) -> float:
+    """The record's fault time, s: ``fault_time_s``, or drawn from the prior's grid (generator
+    ``[seed, 13]``: the records of one seed share it across faults and speeds)."""
+    if params["fault_time_s"] != -1.0:
+        return float(params["fault_time_s"])
+    return float(grid_s[np.random.default_rng([seed, 13]).integers(len(grid_s))])
+
+
+def run_record(params: dict, settings: dict, fixed: dict, theta: np.ndarray, fault: Fault | None,
+               role: str, speed_kmh: float, seed: int, values: np.ndarray, names: list[str],
+               with_rbpf: bool) -> tuple[RecordRun, dict]:
+    """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
+    what the illustration needs (RBPF estimates, the exact posterior's fault time and value)."""
+    grid_s = faults.fault_times_s(settings)
+    tau = fault_time(params, grid_s, seed) if fault is not None else -1.0
+    rec = records.simulate_faulted(params, settings, fixed, theta, fault, max(tau, 0.0),
+                                   speed_kmh, seed)
+    p = records.record_parameters(params, speed_kmh)
+    system = filter_system(p, fixed, theta, rec.record, theta_ref=theta)
+    steps = np.round(grid_s / params["dt_s"]).astype(int) + 1
+    exact = detectors.exact_change_posterior(system, theta, rec.record, values, steps,
+                                             settings["p_no_fault"])
+    statistics = {"residual": detectors.residual_cusum(system, theta, rec.record,
+                                                       params["cusum_variance_ratio"]),
+                  "exact": exact.p_changed}
+    j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
+    estimate = {}
+    if j is not None:
+        estimate["exact"] = float(exact.value_posterior @ (values[:, j] / theta[j]))
+    extra = {"exact": exact}
+    if with_rbpf:
+        relative = detectors.rbpf_estimates(params, system, theta, rec.record, seed)
+        statistics["rbpf"] = detectors.rbpf_departure(relative)
+        if j is not None and fault.parameter in TRACKED:
+            estimate["rbpf"] = float(relative[-1, TRACKED.index(fault.parameter)])
+        extra["rbpf_relative"] = relative
+    run = RecordRun(fault=NO_FAULT if fault is None else fault.name, role=role,
+                    speed_kmh=speed_kmh, seed=seed, fault_time_s=tau,
+                    end_s=rec.end_step * params["dt_s"], flange_contact=rec.flange_contact,
+                    statistics=statistics, post_fault_estimate=estimate,
+                    true_factor_end=float(rec.factor[-1]) if len(rec.factor) else 1.0)
+    extra["factor"] = rec.factor
+    return run, extra
+
+
+def illustration(run: RecordRun, extra: dict, fault: Fault, names: list[str], grid_s, dt_s
+                 ) -> IllustratedRecord:
+    """The illustrated record's :class:`IllustratedRecord`."""
+    true = np.ones((len(extra["factor"]), len(TRACKED)))
+    if fault.parameter in TRACKED:
+        true[:, TRACKED.index(fault.parameter)] = extra["factor"]
+    exact = extra["exact"]
+    return IllustratedRecord(run=run, dt_s=dt_s, rbpf_relative=extra["rbpf_relative"],
+                             true_relative=true, fault_times_s=np.asarray(grid_s),
+                             fault_time_posterior=exact.fault_time_posterior,
+                             value_posterior=dict(zip(names, map(float,
+                                                                 exact.value_posterior))))
+
+
+def run(*, quick: bool = False, progress=None, **params) -> FaultDetectionResult:
+    """Run the appendix; ``params`` are the resolved parameters of :data:`SPEC` (``quick`` is
+    not read: ``params`` already hold the quick sizes)."""
+    validate(params)
+    progress = progress or default_progress()
+    started = time.perf_counter()
+    fixed, theta = vehicle()
+    _, settings = faults.catalogue()
+    chosen = chosen_faults(params)
+    by_name = {f.name: f for f in chosen}
+    names, values = detectors.hypotheses(chosen, theta)
+    if not names:
+        raise ParameterError("parameter 'faults': the exact reference needs at least one abrupt "
+                             "fault")
+    grid_s = faults.fault_times_s(settings)
+    speeds = params["speeds_kmh"]
+    records_, illustrated, spent = [], None, {"rbpf": 0.0, "other": 0.0}
+    items = plan(params, chosen)
+    total = len(items) * len(speeds)
+    for s, speed in enumerate(speeds):
+        for i, (fault_name, role, seed, with_rbpf) in enumerate(items):
+            progress(0.95 * (s * len(items) + i) / total,
+                     f"{speed:g} km/h, {fault_name}, seed {seed}")
+            t0 = time.perf_counter()
+            use_rbpf = with_rbpf and s == 0
+            run_, extra = run_record(params, settings, fixed, theta, by_name.get(fault_name),
+                                     role, speed, seed, values, names, use_rbpf)
+            spent["rbpf" if use_rbpf else "other"] += time.perf_counter() - t0
+            records_.append(run_)
+            if illustrated is None and s == 0 and role == "fault":
+                illustrated = illustration(run_, extra, by_name[fault_name], names, grid_s,
+                                           params["dt_s"])
+    monitor_from = float(grid_s[0])
+    metrics, thresholds, roc = evidence(records_, list(DETECTORS), speeds,
+                                        [f.name for f in chosen], params, params["dt_s"],
+                                        monitor_from)
+    critical = faults.critical_speeds(fixed, theta, chosen)
+    for row in critical.itertuples():
+        metrics[f"critical_speed_kmh_{row.fault}"] = row.critical_speed_kmh
+    metrics["records"] = len(records_)
+    progress(1.0, "done")
+    timings = {"records_with_rbpf_s": spent["rbpf"], "records_without_rbpf_s": spent["other"],
+               "total_s": time.perf_counter() - started}
+    return FaultDetectionResult(metrics=metrics, timings=timings,
+                                timeseries=_timeseries(illustrated), faults=tuple(chosen),
+                                records=tuple(records_), thresholds=thresholds,
+                                dt_s=params["dt_s"], monitor_from_s=monitor_from,
+                                critical_speeds=critical, roc=roc, illustrated=illustrated)
+
+
+def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
+    """The illustrated record's statistics and estimates, one row per sample."""
+    run_ = ill.run
+    K = len(run_.statistics["exact"])
+    out = pd.DataFrame({"t_s": ill.dt_s * np.arange(1, K + 1)})
+    for name, stat in run_.statistics.items():
+        out[f"statistic_{name}"] = stat
+    for j, name in enumerate(TRACKED):
+        out[f"rbpf_{name}_relative"] = ill.rbpf_relative[:, j]
+        out[f"true_{name}_relative"] = ill.true_relative[:, j]
+    return out
+
+
+__all__ = ["chosen_faults", "plan", "run", "run_record", "speed_key", "validate"]

@@ -1,0 +1,109 @@
+"""The faults of the appendix: the catalogue (``data/suspension-fault-detection/faults.toml``),
+each fault's schedule θ(t) over a record, the prior grid of fault times, and the critical
+(hunting) speed of the vehicle once a fault has developed — the speed an engineer must stay
+below after it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from railpaper.data import DataError, load_quantities, read_toml
+from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
+from railpaper.experiments.suspension_fault_detection.spec import SPEC
+from railpaper.models import lateral_16state as L
+from railpaper.paths import DATA_DIR
+
+FAULTS_FILE = DATA_DIR / SPEC.name / "faults.toml"
+#: The catalogue's scalar settings (value, unit, source each).
+SETTINGS = ("drift_s", "drift_pieces", "fault_time_first_s", "fault_time_last_s",
+            "fault_time_spacing_s", "p_no_fault", "flange_clearance_m")
+KINDS = ("abrupt", "drift")
+#: Speeds searched for the critical speed, km/h.
+CRITICAL_SEARCH_KMH = np.arange(100.0, 600.0 + 1e-9, 2.5)
+
+
+def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
+    """The faults by name, and the settings (:data:`SETTINGS`, SI units) of the data file."""
+    document = read_toml(path)
+    faults = {}
+    for name, row in document.get("faults", {}).items():
+        fault = Fault(name=name, parameter=row.get("parameter", ""),
+                      factor=float(row.get("factor", -1.0)), kind=row.get("kind", ""),
+                      label=row.get("label", name))
+        if fault.parameter not in L.PARAM_NAMES or fault.kind not in KINDS \
+                or not fault.factor >= 0 or not row.get("source"):
+            raise DataError(f"{path}: fault '{name}' needs parameter (one of "
+                            f"{', '.join(L.PARAM_NAMES)}), factor >= 0, kind (abrupt or drift) "
+                            "and source")
+        faults[name] = fault
+    settings = load_quantities(path, SETTINGS, section="settings")
+    return faults, {k: float(q.value) for k, q in settings.items()}
+
+
+def fault_times_s(settings: dict) -> np.ndarray:
+    """The prior's grid of fault times, s (uniform over it)."""
+    first, last, step = (settings[k] for k in ("fault_time_first_s", "fault_time_last_s",
+                                               "fault_time_spacing_s"))
+    return first + step * np.arange(int(round((last - first) / step)) + 1)
+
+
+def factor_at(fault: Fault, settings: dict, time_s: np.ndarray, fault_time_s: float
+              ) -> np.ndarray:
+    """The faulted parameter's value at ``time_s``, fraction of nominal (1 before the fault)."""
+    t = np.asarray(time_s, float) - fault_time_s
+    if fault.kind == "abrupt":
+        return np.where(t >= 0, fault.factor, 1.0)
+    ramp = np.clip(t / settings["drift_s"], 0.0, 1.0)
+    return 1.0 + (fault.factor - 1.0) * ramp
+
+
+def schedule(fault: Fault | None, settings: dict, theta: np.ndarray, fault_step: int,
+             fine_steps: int, dt_fine_s: float) -> tuple[list[np.ndarray], list[int]]:
+    """θ piecewise constant over the truth's fine steps: ``(thetas, starts)`` for
+    :func:`railpaper.models.lateral_16state.simulate_truth_schedule`.  An abrupt fault changes θ
+    after fine step ``fault_step``; a drift moves in ``drift_pieces`` equal pieces, each held at
+    the ramp's value at its middle."""
+    if fault is None:
+        return [theta], [0]
+    j = L.PARAM_NAMES.index(fault.parameter)
+    thetas, starts = [theta], [0]
+    if fault.kind == "abrupt":
+        changed = theta.copy()
+        changed[j] *= fault.factor
+        return thetas + [changed], starts + [min(fault_step, fine_steps)]
+    pieces = int(settings["drift_pieces"])
+    span = settings["drift_s"] / dt_fine_s
+    for i in range(pieces):
+        start = fault_step + int(round(i * span / pieces))
+        if start >= fine_steps:
+            break
+        changed = theta.copy()
+        changed[j] *= 1.0 + (fault.factor - 1.0) * (i + 0.5) / pieces
+        thetas.append(changed)
+        starts.append(start)
+    if fault_step + span < fine_steps:                   # the end value, held after the drift
+        changed = theta.copy()
+        changed[j] *= fault.factor
+        thetas.append(changed)
+        starts.append(fault_step + int(round(span)))
+    return thetas, starts
+
+
+def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.DataFrame:
+    """The model's critical speed, km/h, fault-free and after each fault has fully developed
+    (−1: stable up to the search's end, :data:`CRITICAL_SEARCH_KMH`)."""
+    rows = []
+    for fault in [None] + list(faults):
+        changed = theta.copy()
+        if fault is not None:
+            changed[L.PARAM_NAMES.index(fault.parameter)] *= fault.factor
+        _, v = L.critical_speed(fixed, changed, CRITICAL_SEARCH_KMH / 3.6)
+        rows.append({"fault": NO_FAULT if fault is None else fault.name,
+                     "label": "fault-free" if fault is None else fault.label,
+                     "critical_speed_kmh": v * 3.6 if v > 0 else -1.0})
+    return pd.DataFrame(rows)
+
+
+__all__ = ["FAULTS_FILE", "SETTINGS", "catalogue", "critical_speeds", "factor_at",
+           "fault_times_s", "schedule"]

@@ -1,0 +1,342 @@
+"""Figures of appendix ``suspension-fault-detection`` (matplotlib, ≤ 7 in wide, legends below the
+axes, outside the data).
+
+Each function takes the run's :class:`FaultDetectionResult` and its parameters and returns the
+figure; the notebook saves it and shows it as a numbered MyST figure.  Detectors keep one colour
+and marker throughout (:data:`DETECTOR_STYLES`); a detector that did not run at a speed (the RBPF
+beyond the first) is left out of that speed's panels.
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+
+from railpaper.experiments.display import number
+from railpaper.experiments.suspension_fault_detection.result import NO_FAULT
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
+from railpaper.experiments.suspension_fault_detection.tables import (
+    DETECTOR_SHORT,
+    PARAMETERS,
+    fault_short_label,
+    speed_key,
+)
+
+#: Colour and marker of each detector.
+DETECTOR_STYLES = {"residual": ("C0", "o"), "rbpf": ("C2", "s"), "exact": ("C3", "D")}
+#: Colours of the tracked parameters' estimates.
+PARAMETER_COLOURS = ("C0", "C1")
+#: Where a censored delay ("beyond the record") is drawn, as a multiple of the longest delay a
+#: record can show.
+BEYOND_FACTOR = 1.6
+
+
+def _legend_below(fig, handles, labels, ncol: int = 2) -> None:
+    """One legend for the figure, below the axes (call after ``tight_layout``)."""
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=ncol,
+               frameon=False)
+
+
+def _fault_named(result, name: str):
+    """The run's :class:`Fault` called ``name`` (None: fault-free or unknown)."""
+    return next((f for f in result.faults if f.name == name), None)
+
+
+def _short_name(result, name: str) -> str:
+    """The short mathtext label of fault ``name`` (the name itself when it is not a fault)."""
+    fault = _fault_named(result, name)
+    return fault_short_label(fault, tex=True) if fault is not None else name
+
+
+def _mark_events(ax, run, monitor_from_s: float) -> None:
+    """Shade the time before the monitoring window; mark the fault time and flange contact."""
+    ax.axvspan(0.0, monitor_from_s, color="0.92", zorder=0, lw=0)
+    ax.axvline(run.fault_time_s, color="grey", lw=1.0, ls="--")
+    if run.flange_contact:
+        ax.axvline(run.end_s, color="k", lw=1.4)
+
+
+def record_around_fault(result, params):
+    """The illustrated record (first speed): (a) the RBPF's estimates of K_sy and C_saly as
+    fractions of nominal with their true values (dashed), (b) the residual CUSUM statistic,
+    (c) the exact posterior probability that a fault has happened and (d) the RBPF's departure
+    statistic, each with its alarm threshold; the true fault time (and flange contact, where the
+    record ends at it) marked in every panel. Without RBPF statistics, panels (a) and (d) are
+    left out."""
+    ill = result.illustrated
+    run = ill.run
+    speed = run.speed_kmh
+    stats = run.statistics
+    has_rbpf = "rbpf" in stats and ill.rbpf_relative is not None
+    panels = (["estimates"] if has_rbpf else []) + [d for d in ("residual", "exact", "rbpf")
+                                                     if d in stats]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 1.75 * len(panels) + 0.6),
+                             sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    K = len(next(iter(stats.values())))
+    t = ill.dt_s * np.arange(1, K + 1)
+    titles = {"estimates": "RBPF estimates", "residual": DETECTORS["residual"],
+              "exact": DETECTORS["exact"], "rbpf": "RBPF departure from nominal"}
+    ylabels = {"residual": "CUSUM statistic", "exact": "P(fault happened)",
+               "rbpf": "max |θ̂/θ − 1|"}
+    for letter, ax, panel in zip("abcd", axes, panels):
+        ax.set_title(f"({letter}) {titles[panel]}", fontsize=9, loc="left")
+        if panel == "estimates":
+            for j, (name, colour) in enumerate(zip(TRACKED, PARAMETER_COLOURS)):
+                ax.plot(t, ill.rbpf_relative[:K, j], color=colour, lw=1.0)
+                ax.plot(t, ill.true_relative[:K, j], color=colour, lw=1.4, ls="--")
+            ax.set_ylabel("fraction of nominal")
+        else:
+            colour = DETECTOR_STYLES[panel][0]
+            ax.plot(t, stats[panel], color=colour, lw=1.0)
+            h = result.thresholds.get((panel, speed))
+            if h is not None and np.isfinite(h):
+                ax.axhline(h, color="k", ls=":", lw=1.2)
+                hits = np.flatnonzero((t >= result.monitor_from_s - 1e-9) & (stats[panel] >= h))
+                if hits.size:
+                    ax.plot([t[hits[0]]], [h], marker="v", ms=7, color="k", ls="none",
+                            zorder=5)
+            if panel == "residual":
+                ax.set_yscale("symlog", linthresh=1.0)
+                ax.set_ylim(bottom=0.0)
+            elif panel == "rbpf":
+                ax.set_yscale("log")
+            else:
+                ax.set_ylim(-0.05, 1.05)
+            ax.set_ylabel(ylabels[panel])
+        _mark_events(ax, run, result.monitor_from_s)
+    axes[-1].set_xlabel("time from the record's start (s)")
+    axes[-1].set_xlim(0, max(t[-1], run.end_s))
+    fault = _fault_named(result, run.fault)
+    label = fault.label if fault is not None else run.fault
+    fig.suptitle(f"{label}, {speed:g} km/h (seed {run.seed})", fontsize=10)
+    handles, labels = [], []
+    if has_rbpf:
+        for name, colour in zip(TRACKED, PARAMETER_COLOURS):
+            symbol = PARAMETERS.get(name, (name, name, ""))[1]
+            handles += [Line2D([], [], color=colour, lw=1.0),
+                        Line2D([], [], color=colour, lw=1.4, ls="--")]
+            labels += [f"RBPF estimate of {symbol}", f"true {symbol}"]
+    handles += [Line2D([], [], color="k", ls=":", lw=1.2),
+                Line2D([], [], marker="v", ms=7, color="k", ls="none"),
+                Line2D([], [], color="grey", ls="--", lw=1.0), Patch(color="0.92")]
+    labels += ["alarm threshold", "first alarm in the monitoring window",
+               f"true fault time ({number(run.fault_time_s)} s)",
+               "before the monitoring window (alarms not counted)"]
+    if run.flange_contact:
+        handles.append(Line2D([], [], color="k", lw=1.4))
+        labels.append(f"flange contact: record ends ({number(run.end_s)} s)")
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def _delay_point(ax, x, metrics, key, beyond, colour, marker) -> bool:
+    """One detector's median delay with its interval at ``x``; True when something is drawn."""
+    if key not in metrics:
+        return False
+    med, low, high = (metrics[key], metrics.get(key + "_low", -1.0),
+                      metrics.get(key + "_high", -1.0))
+    low_y = low if low > 0 else beyond
+    high_y = high if high > 0 else beyond
+    if med > 0:
+        ax.errorbar([x], [med], yerr=[[med - low_y], [high_y - med]], fmt=marker, color=colour,
+                    ms=5, capsize=2, lw=1.0)
+    else:
+        ax.vlines(x, low_y, beyond, color=colour, lw=1.0, ls=":")
+        ax.plot([x], [beyond], marker="^", ms=7, mfc="white", mec=colour, ls="none")
+    if high < 0 and med > 0:
+        ax.plot([x], [beyond], marker="^", ms=4, color=colour, ls="none")
+    return True
+
+
+def delay_by_fault(result, params):
+    """Per speed (columns), the median detection delay of each detector (offset markers) on
+    each fault (x), with its 95 % interval over records, log scale; a median or interval end
+    beyond the record (fewer than half the records alarmed after the fault) is drawn as an
+    upward triangle in the grey band at the top. A grey bar marks the median time from the fault
+    to flange contact, where the fault's records reach it."""
+    speeds = params["speeds_kmh"]
+    m = result.metrics
+    longest = params["duration_s"] - result.monitor_from_s
+    beyond = BEYOND_FACTOR * longest
+    fig, axes = plt.subplots(1, len(speeds), figsize=(7, 3.9), sharey=True, squeeze=False)
+    axes = axes[0]
+    offsets = dict(zip(DETECTORS, np.linspace(-0.24, 0.24, len(DETECTORS))))
+    drawn, flange, censored = set(), False, False
+    for ax, speed in zip(axes, speeds):
+        sk = speed_key(speed)
+        ran = []
+        for i, f in enumerate(result.faults):
+            for det in DETECTORS:
+                colour, marker = DETECTOR_STYLES[det]
+                key = f"delay_median_s_{det}_{f.name}_{sk}"
+                if _delay_point(ax, i + offsets[det], m, key, beyond, colour, marker):
+                    drawn.add(det)
+                    ran.append(det)
+                    censored |= m[key] < 0
+            rate = m.get(f"flange_contact_rate_{f.name}_{sk}", 0.0)
+            after = m.get(f"flange_contact_after_s_{f.name}_{sk}", -1.0)
+            if rate > 0 and after >= 0:
+                ax.hlines(max(after, result.dt_s), i - 0.4, i + 0.4, color="grey", lw=2.5,
+                          alpha=0.7)
+                flange = True
+        ax.axhspan(longest, 2.2 * longest, color="0.9", zorder=0)
+        missing = [DETECTOR_SHORT[d] for d in DETECTORS if d not in ran]
+        ax.set_title(f"{speed:g} km/h" + (f" (no {', '.join(missing)})" if missing else ""),
+                     fontsize=9)
+        ax.set_xticks(range(len(result.faults)))
+        ax.set_xticklabels([fault_short_label(f, tex=True) for f in result.faults],
+                           rotation=35, ha="right", fontsize=8)
+        ax.set_xlim(-0.6, len(result.faults) - 0.4)
+        ax.set_xlabel("fault")
+    axes[0].set_yscale("log")
+    axes[0].set_ylim(0.5 * result.dt_s, 2.2 * longest)
+    decades = 10.0 ** np.arange(np.ceil(np.log10(0.5 * result.dt_s)),
+                                np.floor(np.log10(longest)) + 1)
+    axes[0].set_yticks(list(decades) + [beyond])
+    axes[0].set_yticklabels([f"{d:g}" for d in decades] + ["beyond\nthe record"])
+    axes[0].minorticks_off()
+    axes[0].set_ylabel("detection delay after the fault (s)")
+    handles = [Line2D([], [], color=DETECTOR_STYLES[d][0], marker=DETECTOR_STYLES[d][1],
+                      ls="-", lw=1.0, ms=5) for d in DETECTORS if d in drawn]
+    labels = [f"{DETECTOR_SHORT[d]}: median, 95 % interval" for d in DETECTORS if d in drawn]
+    if censored:
+        handles.append(Line2D([], [], marker="^", ms=7, mfc="white", mec="k", ls="none"))
+        labels.append("median beyond the record (dotted: its interval)")
+    if flange:
+        handles.append(Line2D([], [], color="grey", lw=2.5, alpha=0.7))
+        labels.append("median time from the fault to flange contact")
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def roc_curves(result, params):
+    """At the first speed, one panel per fault: each detector's rate of detection within 1 s
+    against its false alarms per hour on the fault-free records as the threshold varies (log x;
+    zero false alarms drawn at the left edge, tick "0"), with the calibrated threshold's
+    operating point (false alarms on the evaluation records) as a large open marker."""
+    speed = params["speeds_kmh"][0]
+    sk = speed_key(speed)
+    m = result.metrics
+    roc = result.roc
+    roc = roc[roc["speed_kmh"] == speed] if roc is not None and len(roc) else None
+    faults = list(result.faults)
+    operating = [m.get(f"false_alarms_per_hour_{d}_{sk}") for d in DETECTORS]
+    values = [v for v in operating if v is not None]
+    if roc is not None:
+        values += list(roc["false_alarms_per_hour"])
+    positive = [v for v in values if v > 0]
+    floor = min(positive) / 10 if positive else 1.0
+    top = max(positive) * 2 if positive else 10.0
+    ncol = min(3, len(faults))
+    nrow = int(np.ceil(len(faults) / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(7, 2.3 * nrow + 0.8), sharex=True,
+                             sharey=True, squeeze=False)
+    drawn = set()
+    for ax, f in zip(axes.flat, faults):
+        for det in DETECTORS:
+            colour, marker = DETECTOR_STYLES[det]
+            if roc is not None:
+                c = roc[(roc["detector"] == det) & (roc["fault"] == f.name)]
+                c = c.sort_values("threshold")
+                if len(c):
+                    x = np.maximum(c["false_alarms_per_hour"].to_numpy(), floor)
+                    ax.plot(x, 100 * c["detected_within_1s"].to_numpy(), color=colour, lw=1.0,
+                            marker=marker, ms=2.5)
+                    drawn.add(det)
+            fa = m.get(f"false_alarms_per_hour_{det}_{sk}")
+            hit = m.get(f"detected_within_1s_{det}_{f.name}_{sk}")
+            if fa is not None and hit is not None:
+                ax.plot([max(fa, floor)], [100 * hit], marker=marker, ms=10, mfc="none",
+                        mec=colour, mew=1.6, ls="none")
+                drawn.add(det)
+        ax.set_title(fault_short_label(f, tex=True), fontsize=9)
+        ax.set_xscale("log")
+        ax.set_xlim(floor / 1.5, top)
+        ax.set_ylim(-5, 105)
+    for ax in axes.flat[len(faults):]:
+        ax.set_visible(False)
+    decades = 10.0 ** np.arange(np.ceil(np.log10(floor * 1.5)), np.floor(np.log10(top)) + 1)
+    ticks = [floor] + list(decades)
+    for ax in axes.flat[:len(faults)]:
+        ax.set_xticks(ticks)
+        ax.set_xticklabels(["0"] + [f"{d:g}" for d in decades], fontsize=8)
+        ax.minorticks_off()
+    for ax in axes[:, 0]:
+        ax.set_ylabel("detected within 1 s (%)")
+    for j in range(ncol):
+        shown = [i for i in range(nrow) if i * ncol + j < len(faults)]
+        if shown:
+            axes[shown[-1], j].set_xlabel("false alarms per hour (1/h)")
+            axes[shown[-1], j].xaxis.set_tick_params(labelbottom=True)
+    fig.suptitle(f"{speed:g} km/h: detection within 1 s against false alarms", fontsize=10)
+    handles = [Line2D([], [], color=DETECTOR_STYLES[d][0], marker=DETECTOR_STYLES[d][1],
+                      ms=2.5, lw=1.0) for d in DETECTORS if d in drawn]
+    labels = [f"{DETECTOR_SHORT[d]}: over thresholds" for d in DETECTORS if d in drawn]
+    handles += [Line2D([], [], color="k", marker="o", ms=10, mfc="none", mew=1.6, ls="none")]
+    labels += ["operating point at the calibrated threshold"]
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=2)
+    return fig
+
+
+def fault_time_posterior(result, params):
+    """The illustrated record's exact posterior: (left) P(fault time | the whole record, a fault
+    happened) over the prior's grid of fault times, with the true fault time marked; (right)
+    P(which fault | the record, a fault happened) over the abrupt faults of the Kalman bank,
+    the true fault highlighted. Log scales: the posterior is usually sure to many orders of
+    magnitude; values below 1e-300 (or exactly 0) sit on the axis."""
+    ill = result.illustrated
+    run = ill.run
+    floor = 1e-300
+    fig, (left, right) = plt.subplots(1, 2, figsize=(7, 3.2),
+                                      gridspec_kw={"width_ratios": [3, 2]})
+    times = np.asarray(ill.fault_times_s, float)
+    p = np.maximum(np.asarray(ill.fault_time_posterior, float), floor)
+    width = 0.8 * (np.min(np.diff(times)) if times.size > 1 else 0.1)
+    left.bar(times, p, width=width, color="C0", bottom=floor)
+    if run.fault_time_s >= 0:
+        left.axvline(run.fault_time_s, color="grey", ls="--", lw=1.0)
+    ticks = [1e-300, 1e-200, 1e-100, 1.0]
+    left.set_yscale("log")
+    left.set_ylim(floor, 10)
+    left.set_yticks(ticks)
+    left.minorticks_off()
+    left.set(xlabel="fault time (s)", ylabel="posterior probability")
+    left.set_title("when: P(fault time | record)", fontsize=9)
+    names = list(ill.value_posterior)
+    values = np.maximum([ill.value_posterior[n] for n in names], floor)
+    colours = ["C3" if n == run.fault else "0.7" for n in names]
+    y = np.arange(len(names))
+    right.barh(y, values, color=colours, left=floor)
+    right.set_xscale("log")
+    right.set_xlim(floor, 10)
+    right.set_xticks(ticks)
+    right.minorticks_off()
+    right.set_yticks(y)
+    right.set_yticklabels([f"{_short_name(result, n)}\nP = {number(ill.value_posterior[n], 2)}"
+                           for n in names], fontsize=8)
+    right.invert_yaxis()
+    right.set(xlabel="posterior probability")
+    right.set_title("which: P(fault | record)", fontsize=9)
+    fault = _fault_named(result, run.fault)
+    truth = fault.label if fault is not None else run.fault
+    fig.suptitle(f"Exact posterior of the illustrated record: {truth}, {run.speed_kmh:g} km/h",
+                 fontsize=10)
+    handles = [Line2D([], [], color="grey", ls="--", lw=1.0), Patch(color="C3"),
+               Patch(color="0.7")]
+    labels = [f"true fault time ({number(run.fault_time_s)} s)", "true fault",
+              "other faults of the bank"]
+    if run.fault != NO_FAULT and run.fault not in names:
+        labels[1] = "true fault (not in the bank: a drift)"
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=3)
+    return fig
+
+
+__all__ = ["DETECTOR_STYLES", "delay_by_fault", "fault_time_posterior", "record_around_fault",
+           "roc_curves"]

@@ -1,0 +1,89 @@
+"""The appendix's records: paper 003's lateral vehicle on an alignment profile, with a fault
+that starts at a known (to us) time and is unknown to the detectors.
+
+The truth is simulated exactly on the fine grid with θ piecewise constant
+(:func:`railpaper.models.lateral_16state.simulate_truth_schedule`); the measurement matrix
+changes with θ too, because the four accelerations are rows of A(θ) x.  A sample at time t_k
+reads θ of the transition that ended there, so a fault at time τ = j·dt_s first shows in filter
+step j + 1 (1-based), both in the data and in the exact reference's hypothesis "τ = j + 1".
+Where a fault makes the vehicle hunt, the record ends at the last sample before a wheelset
+reaches flange contact: the linear model has no flange.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from railpaper.experiments.lateral_vehicle import (
+    LateralRecord,
+    sampled_record,
+    track_velocity,
+)
+from railpaper.experiments.suspension_fault_detection import faults as F
+from railpaper.experiments.suspension_fault_detection.result import Fault
+from railpaper.models import lateral_16state as L
+
+
+@dataclass(frozen=True)
+class FaultedRecord:
+    """One simulated record and where its fault and its end lie.
+
+    Attributes
+    ----------
+    record : LateralRecord
+        What the detectors are given (``y`` ends at ``end_step``).
+    fault_step : int
+        First filter step (1-based) whose transition and measurement follow the fault; −1 when
+        fault-free.
+    end_step : int
+        Samples in the record.
+    flange_contact : bool
+        The record was cut at flange contact.
+    factor : ndarray, (end_step,)
+        The faulted parameter's true value at each sample, fraction of nominal.
+    """
+
+    record: LateralRecord
+    fault_step: int
+    end_step: int
+    flange_contact: bool
+    factor: np.ndarray
+
+
+def record_parameters(params: dict, speed_kmh: float) -> dict:
+    """The settings :mod:`railpaper.experiments.lateral_vehicle` reads, for one speed."""
+    return dict(params, speed_kmh=speed_kmh,
+                n_steps=int(round(params["duration_s"] / params["dt_s"])))
+
+
+def simulate_faulted(params: dict, settings: dict, fixed: dict, theta: np.ndarray,
+                     fault: Fault | None, fault_time_s: float, speed_kmh: float, seed: int
+                     ) -> FaultedRecord:
+    """The record of ``seed`` at ``speed_kmh`` with ``fault`` from ``fault_time_s`` on (None:
+    fault-free); sensor noise and track as chapter 003's records."""
+    p = record_parameters(params, speed_kmh)
+    sub, K = p["truth_substeps"], p["n_steps"]
+    dt_fine = p["dt_s"] / sub
+    dq = track_velocity(p, fixed, seed)
+    fault_sample = int(round(fault_time_s / p["dt_s"])) if fault is not None else K
+    thetas, starts = F.schedule(fault, settings, theta, fault_sample * sub, K * sub, dt_fine)
+    v = speed_kmh / 3.6
+    states = L.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine, dq[:-1])
+    H_pieces = np.stack([L.measurement_matrix(L.build_A_direct(fixed, th, v)) for th in thetas])
+    piece = np.searchsorted(np.asarray(starts), np.arange(1, K + 1) * sub, side="left") - 1
+    record = sampled_record(p, seed, states, H_pieces[piece], dq)
+    contact = L.flange_contact_step(states, settings["flange_clearance_m"])
+    end = K if contact < 0 else min(K, (contact - 1) // sub)
+    if end < K:
+        record = LateralRecord(seed=record.seed, y=record.y[:end], u_mps=record.u_mps[:end],
+                               du_var_m2ps2=record.du_var_m2ps2, u_var_m2ps2=record.u_var_m2ps2)
+    j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
+    factor = (np.ones(end) if j is None else
+              np.array([th[j] for th in thetas])[piece[:end]] / theta[j])
+    return FaultedRecord(record=record, fault_step=fault_sample + 1 if fault else -1,
+                         end_step=end, flange_contact=end < K, factor=factor)
+
+
+__all__ = ["FaultedRecord", "record_parameters", "simulate_faulted"]

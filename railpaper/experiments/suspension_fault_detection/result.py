@@ -1,0 +1,176 @@
+"""Typed results of the fault-detection appendix: the faults, every record's alarm statistics,
+and the illustrated record.
+
+:func:`railpaper.experiments.suspension_fault_detection.experiment.run` returns a
+:class:`FaultDetectionResult`: the pipeline's :class:`ChapterResult` (metrics, timings, time
+series) plus the records (:class:`RecordRun`, one per simulated record and speed), each
+detector's threshold, the faults' critical speeds and the illustrated record
+(:class:`IllustratedRecord`).  Times are seconds from the record's start; a statistic's row k − 1
+is its value after measurement k (time k·dt_s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from railpaper.experiments.base import ChapterResult
+
+#: The fault name of a fault-free record.
+NO_FAULT = "none"
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault of ``data/suspension-fault-detection/faults.toml`` (or the user's own).
+
+    Attributes
+    ----------
+    name : str
+        Its key (``csaly_half``, …).
+    parameter : str
+        The model parameter it changes (:data:`railpaper.models.lateral_16state.PARAM_NAMES`).
+    factor : float
+        The parameter's value after the fault, as a fraction of nominal (1).
+    kind : str
+        ``"abrupt"`` (from the fault time on) or ``"drift"`` (linear from 1 to ``factor`` over
+        the catalogue's ``drift_s``).
+    label : str
+        Words for figures and tables.
+    """
+
+    name: str
+    parameter: str
+    factor: float
+    kind: str
+    label: str
+
+
+@dataclass(frozen=True)
+class RecordRun:
+    """Every detector on one record.
+
+    Attributes
+    ----------
+    fault : str
+        The fault's name, or :data:`NO_FAULT`.
+    role : str
+        ``"fault"``; for a fault-free record ``"calibration"`` (its statistics set the
+        thresholds) or ``"evaluation"`` (its alarms are the false alarms counted).
+    speed_kmh : float
+        Vehicle speed, km/h.
+    seed : int
+        Seed of the track profile and the sensor noise.
+    fault_time_s : float
+        When the fault starts (−1 for a fault-free record), s.
+    end_s : float
+        When the record ends, s: its duration, or the first sample at which a wheelset reaches
+        flange contact.
+    flange_contact : bool
+        The record ended at flange contact.
+    statistics : dict of str to ndarray (K,)
+        Each detector's alarm statistic after every sample (dimensionless: the CUSUM's
+        log-likelihood ratio, the RBPF estimate's largest relative departure from nominal, the
+        posterior probability that the fault has happened).
+    post_fault_estimate : dict of str to float
+        Each estimating detector's value of the faulted parameter at the record's end, as a
+        fraction of nominal (``exact``: the posterior mean over the hypotheses that name this
+        parameter; ``rbpf``: its estimate).
+    true_factor_end : float
+        The faulted parameter's true value at the record's end, fraction of nominal (1 when
+        fault-free).
+    """
+
+    fault: str
+    role: str
+    speed_kmh: float
+    seed: int
+    fault_time_s: float
+    end_s: float
+    flange_contact: bool
+    statistics: dict[str, np.ndarray]
+    post_fault_estimate: dict[str, float]
+    true_factor_end: float
+
+
+@dataclass(frozen=True)
+class IllustratedRecord:
+    """The record drawn in the chapter's first figure (fault ``fault``, seed ``seed``, first
+    speed), with what the detectors estimate along it.
+
+    Attributes
+    ----------
+    run : RecordRun
+    dt_s : float
+        Sample time, s.
+    rbpf_relative : ndarray, (K, 2)
+        The RBPF's estimates of the tracked parameters
+        (:data:`~railpaper.experiments.suspension_fault_detection.spec.TRACKED`), fraction of
+        nominal.
+    true_relative : ndarray, (K, 2)
+        Their true values, fraction of nominal.
+    fault_times_s : ndarray, (J,)
+        The grid of fault times of the exact reference, s.
+    fault_time_posterior : ndarray, (J,)
+        P(fault time | all the record, a fault happened).
+    value_posterior : dict of str to float
+        P(which fault | all the record, a fault happened), by fault name.
+    """
+
+    run: RecordRun
+    dt_s: float
+    rbpf_relative: np.ndarray
+    true_relative: np.ndarray
+    fault_times_s: np.ndarray
+    fault_time_posterior: np.ndarray
+    value_posterior: dict[str, float]
+
+
+@dataclass
+class FaultDetectionResult(ChapterResult):
+    """A run of the appendix: :class:`ChapterResult` plus
+
+    Attributes
+    ----------
+    faults : tuple of Fault
+        The faults studied, in the run's order.
+    records : tuple of RecordRun
+        Every record at every speed.
+    thresholds : dict of (str, float) to float
+        (detector, speed km/h) → its alarm threshold, set on the calibration records.
+    dt_s : float
+        Sample time, s.
+    monitor_from_s : float
+        Alarms count from this time (the first possible fault time), s.
+    critical_speeds : pandas.DataFrame
+        Per fault (and ``none``): the model's critical (hunting) speed, km/h (−1: above the
+        range searched), after the fault has fully developed.
+    roc : pandas.DataFrame
+        One row per (detector, speed, fault, threshold): false alarms per hour and the rate of
+        detection within 1 s.
+    illustrated : IllustratedRecord
+    """
+
+    faults: tuple[Fault, ...] = ()
+    records: tuple[RecordRun, ...] = ()
+    thresholds: dict[tuple[str, float], float] = field(default_factory=dict)
+    dt_s: float = 0.0
+    monitor_from_s: float = 0.0
+    critical_speeds: pd.DataFrame | None = None
+    roc: pd.DataFrame | None = None
+    illustrated: IllustratedRecord | None = None
+
+    def select(self, *, fault: str | None = None, role: str | None = None,
+               speed_kmh: float | None = None, detector: str | None = None
+               ) -> list[RecordRun]:
+        """The records of one fault / role / speed (None: any), with a statistic of
+        ``detector`` when given."""
+        return [r for r in self.records
+                if (fault is None or r.fault == fault) and (role is None or r.role == role)
+                and (speed_kmh is None or r.speed_kmh == speed_kmh)
+                and (detector is None or detector in r.statistics)]
+
+
+__all__ = ["NO_FAULT", "Fault", "FaultDetectionResult", "IllustratedRecord", "RecordRun"]

@@ -1,0 +1,186 @@
+"""Tables of appendix ``suspension-fault-detection`` as the page shows them (MyST Markdown, units
+in the headers): the faults and their critical speeds, each detector's detection delay and rates,
+false alarms and post-fault estimates, and the short names of faults and detectors that the
+figures share.
+
+Every function takes the run's :class:`FaultDetectionResult` (and its parameters) and returns
+Markdown: numbers to four significant digits, "beyond the record"
+for the −1 of a median delay that no record reached, "—" where a detector has no metric (the RBPF
+runs only at the first speed).
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from railpaper.experiments.display import markdown, number
+from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, WITHIN_S
+
+#: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
+DETECTOR_SHORT = {"residual": "residual CUSUM", "rbpf": "RBPF band", "exact": "exact posterior"}
+
+#: What each detector's alarm statistic is (its threshold's meaning, dimensionless).
+STATISTICS = {"residual": "CUSUM log-likelihood ratio of the whitened innovations",
+              "rbpf": "largest relative departure of the RBPF estimate from nominal",
+              "exact": "posterior probability that a fault has happened"}
+
+#: Model parameters (``lateral_16state.PARAM_NAMES``): plain symbol, mathtext symbol, words.
+PARAMETERS = {"csy": ("C_sy", r"$C_{sy}$", "secondary lateral damping"),
+              "lambda": ("λ", r"$\lambda$", "wheel conicity"),
+              "kpy": ("K_py", r"$K_{py}$", "primary lateral stiffness"),
+              "ksy": ("K_sy", r"$K_{sy}$", "secondary lateral stiffness"),
+              "csaly": ("C_saly", r"$C_{saly}$", "anti-yaw damping")}
+
+#: Dash of a cell without a metric.
+NONE = "—"
+
+
+def speed_key(speed_kmh: float) -> str:
+    """``300kmh`` for 300.0: the speed as it appears in metric names."""
+    return f"{speed_kmh:g}kmh"
+
+
+def fault_short_label(fault: Fault, tex: bool = False) -> str:
+    """A fault in a few characters, e.g. "C_saly 50 %" or "C_saly → 50 % (drift)" (mathtext
+    symbols with ``tex``, for figures)."""
+    plain, math, _ = PARAMETERS.get(fault.parameter, (fault.parameter, fault.parameter, ""))
+    symbol = math if tex else plain
+    value = f"{number(100 * fault.factor, 3)} %"
+    return f"{symbol} → {value} (drift)" if fault.kind == "drift" else f"{symbol} {value}"
+
+
+def percent(ratio: float) -> str:
+    """A rate as a percentage to three significant digits (0.9667 → "96.7 %")."""
+    return f"{number(100 * ratio, 3)} %"
+
+
+def delay_text(value: float) -> str:
+    """A delay in s, or "beyond the record" for the −1 of a censored one."""
+    return "beyond the record" if value < 0 else number(value)
+
+
+def clean(value: float) -> float:
+    """``value`` with floating-point dust (|x| < 1e-12, e.g. 1.1e-16) set to 0."""
+    return 0.0 if abs(value) < 1e-12 else value
+
+
+def interval_text(metrics: dict, key: str, show=number, censored: bool = False) -> str:
+    """``value [low, high]`` of a metric with its 95 % interval (``censored``: a −1 is "beyond
+    the record" as the value, "beyond" as an interval end); NONE when it is missing."""
+    if key not in metrics:
+        return NONE
+    nan = float("nan")
+    value, low, high = (clean(metrics.get(key + tail, nan)) for tail in ("", "_low", "_high"))
+
+    def end(x: float) -> str:
+        return "beyond" if censored and x < 0 else show(x)
+    return f"{show(value)} [{end(low)}, {end(high)}]"
+
+
+def faults_table(result) -> str:
+    """One row per fault (and the fault-free vehicle first): its label, the parameter it changes,
+    the parameter's value after the fault (% of nominal), abrupt or drifting, and the model's
+    critical (hunting) speed once the fault has fully developed (−1: above the 600 km/h
+    searched)."""
+    critical = {}
+    if result.critical_speeds is not None:
+        critical = dict(zip(result.critical_speeds["fault"],
+                            result.critical_speeds["critical_speed_kmh"]))
+
+    def speed(name: str) -> str:
+        value = critical.get(name, result.metrics.get(f"critical_speed_kmh_{name}"))
+        if value is None:
+            return NONE
+        return "above 600" if value < 0 else number(value)
+
+    rows = [("fault-free", NONE, "100", NONE, speed(NO_FAULT))]
+    for f in result.faults:
+        plain, _, words = PARAMETERS.get(f.parameter, (f.parameter, "", ""))
+        rows.append((f.label, f"{words} {plain}".strip(), number(100 * f.factor, 3), f.kind,
+                     speed(f.name)))
+    return markdown(pd.DataFrame(rows, columns=[
+        "fault", "parameter", "value after the fault (% of nominal)", "kind",
+        "critical speed after the fault (km/h)"]))
+
+
+def detection_table(result, params) -> str:
+    """One table per speed (the run's order, each under a bold "<speed> km/h" line), one row
+    per fault and for each detector the median detection delay with its 95 % interval over
+    records (s; "beyond the record" where fewer than half the records alarm after the fault)
+    and the shares of records detected within the shortest and the longest horizon; "—" for a
+    detector not run at that speed."""
+    short, long_ = WITHIN_S[0], WITHIN_S[-1]
+    out = []
+    for speed in params["speeds_kmh"]:
+        sk = speed_key(speed)
+        columns = ["fault"]
+        for det in DETECTORS:
+            n = next((result.metrics[f"delay_median_s_{det}_{f.name}_{sk}_n"]
+                      for f in result.faults
+                      if f"delay_median_s_{det}_{f.name}_{sk}_n" in result.metrics), None)
+            records = "" if n is None else f", {number(n)} record{'s' if n != 1 else ''}"
+            columns += [f"{DETECTOR_SHORT[det]}: median delay [95 %] (s{records})",
+                        f"{DETECTOR_SHORT[det]}: within {short:g} s / {long_:g} s"]
+        rows = []
+        for f in result.faults:
+            row = [f.label]
+            for det in DETECTORS:
+                tag = f"{det}_{f.name}_{sk}"
+                row.append(interval_text(result.metrics, f"delay_median_s_{tag}", delay_text,
+                                         censored=True))
+                a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
+                b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
+                row.append(NONE if a is None or b is None else f"{percent(a)} / {percent(b)}")
+            rows.append(row)
+        out.append(f"**{speed:g} km/h**\n\n" + markdown(pd.DataFrame(rows, columns=columns)))
+    return "\n".join(out)
+
+
+def false_alarm_table(result, params) -> str:
+    """Per speed and detector: its alarm threshold (set on the calibration records at the run's
+    false-alarm probability; dimensionless, the statistic named), the false alarms per hour on
+    the evaluation records with their 95 % interval, and how many evaluation records there
+    were; detectors not run at a speed are left out."""
+    rows = []
+    for speed in params["speeds_kmh"]:
+        sk = speed_key(speed)
+        for det in DETECTORS:
+            key = f"false_alarms_per_hour_{det}_{sk}"
+            if key not in result.metrics:
+                continue
+            h = result.thresholds.get((det, speed), result.metrics.get(f"threshold_{det}_{sk}"))
+            rows.append((number(speed), DETECTOR_SHORT[det], STATISTICS[det],
+                         NONE if h is None else number(h), interval_text(result.metrics, key),
+                         number(result.metrics.get(key + "_n", float("nan")))))
+    return markdown(pd.DataFrame(rows, columns=[
+        "speed (km/h)", "detector", "alarm statistic", "threshold",
+        "false alarms per hour [95 %] (1/h)", "evaluation records"]))
+
+
+def estimate_table(result, params) -> str:
+    """Per speed and fault, each estimating detector's median |post-fault estimate − truth| of
+    the faulted parameter at the record's end (fraction of nominal) with its 95 % interval and
+    the number of records ("—": not estimated — the RBPF runs at the first speed only, tracks
+    K_sy and C_saly only, and needs two records)."""
+    estimators = [d for d in ("exact", "rbpf") if d in DETECTORS]
+    rows = []
+    for speed in params["speeds_kmh"]:
+        sk = speed_key(speed)
+        for f in result.faults:
+            row = [number(speed), f.label]
+            for det in estimators:
+                key = f"post_fault_error_{det}_{f.name}_{sk}"
+                text = interval_text(result.metrics, key)
+                if key + "_n" in result.metrics:
+                    text += f" (n = {number(result.metrics[key + '_n'])})"
+                row.append(text)
+            rows.append(row)
+    return markdown(pd.DataFrame(rows, columns=["speed (km/h)", "fault"] + [
+        f"{DETECTOR_SHORT[d]}: median abs. error [95 %] (fraction of nominal)"
+        for d in estimators]))
+
+
+__all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "delay_text", "detection_table",
+           "estimate_table", "false_alarm_table", "fault_short_label", "faults_table",
+           "interval_text", "percent", "clean", "speed_key"]

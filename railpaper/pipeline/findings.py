@@ -1,0 +1,102 @@
+"""The findings of a chapter of our own (no paper): ``data/<chapter>/findings.toml``.
+
+A finding is our statement, not a paper's claim, so it has no ledger verdict; it is decided the
+same way, on a statistic's 95 % interval over records against a threshold the statement names::
+
+    [failed_damper_found_fast]
+    finding = "At 300 km/h, a lost anti-yaw damping is detected within 0.5 s by the exact
+               reference in more than 90 % of records"
+    metric = "detected_within_0.5s_exact_csaly_0_300kmh"      # the statistic, from metrics.json
+    interval = ["..._low", "..._high"]                          # its 95 % interval
+    n_samples = "..._n"                                         # records behind it
+    threshold = 0.9
+    side = "above"                                              # "above" or "below" the threshold
+    unit = ""                                                   # optional
+
+Verdicts: **holds** (the whole interval on the stated side), **fails** (the whole interval on
+the other side), **undecided** (the interval straddles the threshold).  A band test
+(tests/pipeline/test_findings.py) checks that every run passing CI gives the same verdict:
+the CI bands of the interval's ends sit on one side of the threshold.
+"""
+
+from __future__ import annotations
+
+from railpaper.data import DataError, read_toml
+from railpaper.pipeline.outputs import chapter_data_dir
+
+FINDING_KEYS = {"finding", "metric", "interval", "n_samples", "threshold", "side", "unit"}
+SIDES = ("above", "below")
+FINDING_VERDICTS = ("holds", "fails", "undecided")
+
+
+def read_findings(chapter: str) -> dict[str, dict]:
+    """The chapter's findings, each checked (one-line :class:`DataError`)."""
+    path = chapter_data_dir(chapter) / "findings.toml"
+    rows = read_toml(path)
+    for key, row in rows.items():
+        unknown = set(row) - FINDING_KEYS
+        missing = FINDING_KEYS - {"unit"} - set(row)
+        if unknown or missing:
+            raise DataError(f"{path}: finding '{key}': "
+                            + (f"unknown key '{sorted(unknown)[0]}'" if unknown
+                               else f"needs '{sorted(missing)[0]}'"))
+        if row["side"] not in SIDES or len(row["interval"]) != 2:
+            raise DataError(f"{path}: finding '{key}': side must be 'above' or 'below' and "
+                            "interval two metric names")
+    return rows
+
+
+def verdict(row: dict, low: float, high: float) -> str:
+    """The verdict of a finding whose interval is [low, high]."""
+    t = row["threshold"]
+    above = low > t if row["side"] == "above" else high < t
+    other = high < t if row["side"] == "above" else low > t
+    return "holds" if above else "fails" if other else "undecided"
+
+
+def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set[str]:
+    """Every verdict a run inside the CI bands could give (one element: the bands decide)."""
+    (lo_min, lo_max), (hi_min, hi_max) = (bands[m] for m in row["interval"])
+    t, out = row["threshold"], set()
+    if row["side"] == "above":
+        if lo_max > t:
+            out.add("holds")
+        if hi_min < t:
+            out.add("fails")
+        if lo_min <= t <= hi_max:
+            out.add("undecided")
+    else:
+        if hi_min < t:
+            out.add("holds")
+        if lo_max > t:
+            out.add("fails")
+        if lo_min <= t <= hi_max:
+            out.add("undecided")
+    return out
+
+
+def judged(chapter: str, metrics: dict) -> list[dict]:
+    """Each finding with this run's statistic, interval, sample size and verdict."""
+    out = []
+    for key, row in read_findings(chapter).items():
+        low, high = (metrics[m] for m in row["interval"])
+        out.append(dict(row, key=key, value=metrics[row["metric"]], low=low, high=high,
+                        n=metrics[row["n_samples"]], verdict=verdict(row, low, high)))
+    return out
+
+
+def findings_markdown(chapter: str, metrics: dict) -> str:
+    """The findings table of a chapter page (MyST markdown)."""
+    lines = ["| finding | threshold | ours (95 % interval, records) | verdict |",
+             "|---|---|---|---|"]
+    for f in judged(chapter, metrics):
+        unit = f" {f['unit']}" if f.get("unit") else ""
+        word = "more than" if f["side"] == "above" else "less than"
+        lines.append(f"| {f['finding']} | {word} {f['threshold']:g}{unit} | "
+                     f"{f['value']:.3g} [{f['low']:.3g}, {f['high']:.3g}], n = {f['n']:g} | "
+                     f"**{f['verdict']}** |")
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["FINDING_VERDICTS", "findings_markdown", "judged", "read_findings", "verdict",
+           "verdicts_over_bands"]

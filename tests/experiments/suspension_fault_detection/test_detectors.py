@@ -1,0 +1,150 @@
+"""The appendix's records and detectors against independent references: the exact change
+posterior against one textbook Kalman filter per hypothesis run separately (the brute-force
+check the appendix's page cites), the faulted record against the fault-free one and against
+its own flange clearance, and the evidence's threshold and censored median against their
+definitions."""
+
+import numpy as np
+import pytest
+
+from railpaper.engine.kalman import predict, update
+from railpaper.experiments.lateral_vehicle import track_velocity
+from railpaper.experiments.suspension_fault_detection import detectors, evidence, faults, records
+from railpaper.experiments.suspension_fault_detection import experiment as chapter
+from railpaper.experiments.suspension_fault_detection.spec import SPEC
+from railpaper.models import lateral_16state as L
+
+PARAMS = SPEC.resolve({}, True)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    fixed, theta = chapter.vehicle()
+    catalogue, settings = faults.catalogue()
+    return fixed, theta, catalogue, settings
+
+
+def _record(setup, fault, speed, seed=2, tau=1.1):
+    fixed, theta, catalogue, settings = setup
+    rec = records.simulate_faulted(PARAMS, settings, fixed, theta,
+                                   None if fault is None else catalogue[fault], tau, speed, seed)
+    system = chapter.filter_system(records.record_parameters(PARAMS, speed), fixed, theta,
+                                   rec.record, theta_ref=theta)
+    return rec, system
+
+
+def test_exact_posterior_equals_one_filter_per_hypothesis(setup):
+    """Short record (1.3 s at 200 km/h, C_saly lost at 1.1 s), three fault times and two fault
+    values: the bank's cumulative log-likelihood of each hypothesis, and the on-line
+    P(fault by k), against textbook filters whose matrices switch at the hypothesis' step."""
+    fixed, theta, catalogue, settings = setup
+    rec, system = _record(setup, "csaly_0", 200.0)
+    K = 260
+    short = type(rec.record)(seed=2, y=rec.record.y[:K], u_mps=rec.record.u_mps[:K],
+                             du_var_m2ps2=rec.record.du_var_m2ps2,
+                             u_var_m2ps2=rec.record.u_var_m2ps2)
+    names, values = detectors.hypotheses([catalogue["csaly_0"], catalogue["ksy_70"]], theta)
+    steps = np.array([201, 221, 241])                    # 1.0, 1.1, 1.2 s at 5 ms
+    exact = detectors.exact_change_posterior(system, theta, short, values, steps, 0.5)
+    before = system(theta[None])
+    after = system(values)
+
+    def run(switch, v):
+        x, P, ll = np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), np.empty(K)
+        for k in range(1, K + 1):
+            s, i = (after, v) if switch is not None and k >= switch else (before, 0)
+            x, P = predict(x, P, s.F[i], s.Q, s.B[i], short.u_mps[k - 1])
+            x, P, ll[k - 1], _, _ = update(x, P, short.y[k - 1], s.H[i], s.R)
+        return np.cumsum(ll)
+
+    none = run(None, 0)
+    changed = np.array([[run(t, v) for t in steps] for v in range(len(values))])   # (V, J, K)
+    log_prior = np.log(0.5 / (len(values) * len(steps)))
+    k = np.arange(1, K + 1)
+    started = steps[None, :, None] <= k[None, None, :]
+    num = np.where(started, log_prior + changed, -np.inf).reshape(-1, K)
+    rest = np.where(~started, log_prior + changed, -np.inf).reshape(-1, K)
+    log_num = np.logaddexp.reduce(num, axis=0)
+    log_den = np.logaddexp(log_num, np.logaddexp(np.log(0.5) + none,
+                                                 np.logaddexp.reduce(rest, axis=0)))
+    assert np.allclose(exact.p_changed, np.exp(log_num - log_den), rtol=1e-8, atol=1e-10)
+    final = log_prior + changed[:, :, -1]
+    post = np.exp(final - final.max())
+    post /= post.sum()
+    assert np.allclose(exact.fault_time_posterior, post.sum(axis=0), atol=1e-9)
+    assert np.allclose(exact.value_posterior, post.sum(axis=1), atol=1e-9)
+    assert exact.value_posterior[names.index("csaly_0")] > 0.99     # it was C_saly lost
+    assert exact.fault_time_posterior[1] > 0.9                      # at 1.1 s
+
+
+def test_faulted_record_equals_the_fault_free_one_until_the_fault(setup):
+    rec, _ = _record(setup, "csaly_half", 200.0, tau=1.5)
+    free, _ = _record(setup, None, 200.0, tau=1.5)
+    first = rec.fault_step - 1                                       # row of the first post-fault sample
+    assert rec.fault_step == int(round(1.5 / PARAMS["dt_s"])) + 1
+    assert np.array_equal(rec.record.y[:first], free.record.y[:first])
+    assert not np.allclose(rec.record.y[first], free.record.y[first])
+    assert np.all(rec.factor[:first] == 1.0) and np.all(rec.factor[first:] == 0.5)
+
+
+def test_the_measurement_switches_with_the_fault(setup):
+    """At the first post-fault sample the accelerations read A(θ after) x: the noise-free
+    measurement there equals H(θ after) x, not H(θ before) x (K_sy acts on the bogie's and the
+    body's lateral accelerations; C_saly only on the bogie's yaw, which no channel reads)."""
+    fixed, theta, catalogue, settings = setup
+    p = records.record_parameters(PARAMS, 200.0)
+    p_clean = dict(PARAMS, noise_acc_wheelset_mps2=1e-300, noise_acc_bogie_mps2=1e-300,
+                   noise_acc_body_mps2=1e-300, noise_yawrate_radps=1e-300)
+    rec = records.simulate_faulted(p_clean, settings, fixed, theta, catalogue["ksy_70"], 1.5,
+                                   200.0, 2)
+    dq = track_velocity(p, fixed, 2)
+    sub, j = p["truth_substeps"], rec.fault_step - 1
+    thetas, starts = faults.schedule(catalogue["ksy_70"], settings, theta, j * sub,
+                                     p["n_steps"] * sub, p["dt_s"] / sub)
+    x = L.simulate_truth_schedule(fixed, thetas, starts, 200 / 3.6, p["dt_s"] / sub, dq[:-1])
+    after = L.measurement_matrix(L.build_A_direct(fixed, thetas[1], 200 / 3.6))
+    before = L.measurement_matrix(L.build_A_direct(fixed, theta, 200 / 3.6))
+    assert np.allclose(rec.record.y[j], after @ x[(j + 1) * sub], rtol=1e-12, atol=1e-15)
+    assert np.allclose(rec.record.y[j - 1], before @ x[j * sub], rtol=1e-12, atol=1e-15)
+    assert not np.allclose(rec.record.y[j], before @ x[(j + 1) * sub])
+
+
+def test_a_hunting_record_ends_before_flange_contact(setup):
+    fixed, theta, catalogue, settings = setup
+    rec, _ = _record(setup, "csaly_0", 300.0, tau=1.0)
+    stable, _ = _record(setup, "csaly_0", 200.0, tau=1.0)
+    assert rec.flange_contact and rec.end_step < PARAMS["duration_s"] / PARAMS["dt_s"]
+    assert not stable.flange_contact and len(stable.record.y) == stable.end_step
+    assert len(rec.record.y) == rec.end_step and rec.end_step > rec.fault_step
+
+
+def test_threshold_allows_at_most_the_false_alarm_probability():
+    rng = np.random.default_rng(5)
+    for n, alpha in ((30, 0.05), (8, 0.05), (200, 0.1), (10, 0.5)):
+        maxima = rng.standard_normal(n)
+        h = evidence.threshold(maxima, alpha)
+        assert np.mean(maxima >= h) <= alpha + 1e-12
+        below = np.max(maxima[maxima < h])                          # the next lower level
+        assert np.mean(maxima >= below) > alpha
+
+
+def test_censored_median_is_the_order_statistic_median():
+    rng = np.random.default_rng(6)
+    x = rng.exponential(size=31)
+    med, low, high = evidence.censored_median(x)
+    assert med == np.median(x) and low <= med <= high
+    y = np.concatenate([x[:20], np.full(11, np.inf)])               # 11 of 31 never alarmed
+    assert evidence.censored_median(y)[0] == np.sort(y)[15]
+    assert evidence.censored_median(np.full(5, np.inf)) == (-1.0, -1.0, -1.0)
+
+
+def test_drift_schedule_ends_at_its_factor(setup):
+    fixed, theta, catalogue, settings = setup
+    fault = catalogue["csaly_drift"]
+    thetas, starts = faults.schedule(fault, settings, theta, 1000, 8000, 5e-4)
+    j = L.PARAM_NAMES.index("csaly")
+    values = np.array([t[j] for t in thetas]) / theta[j]
+    assert values[0] == 1.0 and values[-1] == fault.factor and np.all(np.diff(values) < 0)
+    assert starts[1] == 1000 and starts[-1] == 1000 + int(round(settings["drift_s"] / 5e-4))
+    t = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
+    assert np.allclose(faults.factor_at(fault, settings, t, 1.0), [1, 1, 0.75, 0.5, 0.5])

@@ -1,0 +1,55 @@
+"""The findings of chapters of our own (``data/<chapter>/findings.toml``): each is decided on its
+interval against its threshold, and the CI bands keep every verdict, so a change that flips a
+finding fails ``railpaper check``."""
+
+import pytest
+
+from railpaper.data import DataError
+from railpaper.pipeline.chapters import book_chapters, paper_chapters
+from railpaper.pipeline.check import load_tolerances
+from railpaper.pipeline.findings import read_findings, verdict, verdicts_over_bands
+
+OURS = [c for c in book_chapters() if c not in paper_chapters()]
+
+
+def test_verdict_reads_the_whole_interval():
+    above = {"threshold": 0.5, "side": "above", "interval": ["lo", "hi"]}
+    below = dict(above, side="below")
+    assert verdict(above, 0.6, 0.9) == "holds" and verdict(above, 0.1, 0.4) == "fails"
+    assert verdict(above, 0.4, 0.9) == "undecided" and verdict(above, 0.5, 0.9) == "undecided"
+    assert verdict(below, 0.1, 0.4) == "holds" and verdict(below, 0.6, 0.9) == "fails"
+    assert verdict(below, 0.1, 0.5) == "undecided"
+    # every (low, high) inside these bands gives "holds"; widen the low band across 0.5: no
+    assert verdicts_over_bands(above, {"lo": (0.6, 0.8), "hi": (0.9, 1.0)}) == {"holds"}
+    assert verdicts_over_bands(above, {"lo": (0.4, 0.8), "hi": (0.9, 1.0)}) == {"holds",
+                                                                                 "undecided"}
+    assert verdicts_over_bands(below, {"lo": (0.0, 0.1), "hi": (0.2, 0.4)}) == {"holds"}
+    assert verdicts_over_bands(below, {"lo": (0.0, 0.6), "hi": (0.7, 0.9)}) == {"fails",
+                                                                                 "undecided"}
+
+
+@pytest.mark.parametrize("mode", ["full", "quick"])
+@pytest.mark.parametrize("chapter", OURS)
+def test_bands_decide_every_finding(chapter, mode):
+    bands = {m: (lo, hi) for m, (lo, hi, _) in load_tolerances(chapter)[mode].items()}
+    problems = []
+    for key, row in read_findings(chapter).items():
+        missing = [m for m in [row["metric"], row["n_samples"], *row["interval"]] if m not in bands]
+        if missing:
+            problems.append(f"{key}: no {mode} band for {', '.join(missing)}")
+            continue
+        verdicts = verdicts_over_bands(row, bands)
+        if len(verdicts) != 1:
+            problems.append(f"{key}: {mode} bands allow {sorted(verdicts)}")
+    assert not problems, "\n".join(problems)
+
+
+def test_a_finding_without_a_threshold_is_refused(tmp_path, monkeypatch):
+    import railpaper.pipeline.findings as findings
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "findings.toml").write_text(
+        '[f]\nfinding = "a"\nmetric = "m"\ninterval = ["l", "h"]\nn_samples = "n"\n'
+        'side = "above"\n')
+    monkeypatch.setattr(findings, "chapter_data_dir", lambda chapter: tmp_path / chapter)
+    with pytest.raises(DataError, match="finding 'f': needs 'threshold'"):
+        read_findings("x")
