@@ -75,7 +75,8 @@ def cmd_list(args) -> int:
     from railpaper.experiments import available_chapters, load_chapter
     for name in available_chapters():
         spec = load_chapter(name).SPEC
-        print(f"{name}: {spec.title}  [paper {spec.paper}]")
+        source = f"paper {spec.paper}" if spec.paper else "no paper: a study of our own"
+        print(f"{name}: {spec.title}  [{source}]")
         if spec.quick_sizes:
             print(f"  --quick: {spec.quick_sizes}")
         for p in spec.parameters:

@@ -29,6 +29,7 @@ from railpaper.models import lateral_16state as L
 
 ROO, RBPF, PSO, QG = ("reduced-order-observer", "rbpf-parameter-estimation",
                       "partial-state-observer", "quasi-gaussian-rbpf")
+SFD = "suspension-fault-detection"
 CHEAP = ["--quick", "-p", "mc_seeds", "2", "-p", "sweep_speeds_kmh", "[60]",
          "-p", "speeds_kmh", "[60]"]
 SIGNAL_AFTER_S = 2.0          # after the staging directory appears: the kernel is running cells
@@ -117,6 +118,17 @@ MATRIX = [
                               "--out", "{OUT}"], 2, ["'error_window_start_s'", "duration_s"]),
     ("run-prior-box", ["run", QG, "-p", "a_true", "0.9", "--out", "{OUT}"], 2,
      ["a_true=0.9", "prior box"]),
+    # the fault-detection appendix: a fault time outside the record, a factor <= 0, a name
+    ("run-fault-time-outside", ["run", SFD, "-p", "fault_time_s", "9", "--out", "{OUT}"], 2,
+     ["'fault_time_s' = 9 s lies outside the record"]),
+    ("run-fault-factor-zero", ["run", SFD, "-p", "extra_fault_parameter", "csaly",
+                               "-p", "extra_fault_factor", "0", "--out", "{OUT}"], 2,
+     ["'extra_fault_factor' must be > 0"]),
+    ("run-fault-unknown-parameter", ["run", SFD, "-p", "extra_fault_parameter", "c_saly",
+                                     "--out", "{OUT}"], 2,
+     ["unknown parameter 'c_saly'", "csaly"]),
+    ("run-fault-unknown-name", ["run", SFD, "-p", "faults", "csaly_half,damper",
+                                "--out", "{OUT}"], 2, ["unknown fault 'damper'", "csaly_half"]),
     # run: measurement CSV (rbpf-parameter-estimation)
     ("csv-missing-file", ["run", RBPF, "--quick", "-p", "measurements_csv", "no-such-file.csv",
                           "--out", "{OUT}"], 2, ["measurements_csv", "cannot read"]),

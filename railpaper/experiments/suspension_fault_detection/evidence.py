@@ -22,17 +22,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from railpaper.experiments.suspension_fault_detection.result import RecordRun
+from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S
 from railpaper.stats import median_interval, quantile_ranks, rate
 
 #: Points of each ROC curve (thresholds), at most.
 ROC_POINTS = 60
-
-
-def speed_key(speed_kmh: float) -> str:
-    """``300kmh`` for 300.0: the speed as it appears in metric names."""
-    return f"{speed_kmh:g}kmh"
 
 
 def window_rows(dt_s: float, monitor_from_s: float) -> int:
@@ -207,4 +202,4 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: list[float]
     return metrics, thresholds, pd.DataFrame(roc)
 
 
-__all__ = ["censored_median", "evidence", "speed_key", "threshold", "window_rows"]
+__all__ = ["censored_median", "evidence", "threshold", "window_rows"]

@@ -29,7 +29,7 @@ import pandas as pd
 from railpaper.experiments.base import ParameterError, check_sample_time, default_progress
 from railpaper.experiments.lateral_vehicle import filter_system, vehicle
 from railpaper.experiments.suspension_fault_detection import detectors, faults, records
-from railpaper.experiments.suspension_fault_detection.evidence import evidence, speed_key
+from railpaper.experiments.suspension_fault_detection.evidence import evidence
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
     Fault,
@@ -39,6 +39,7 @@ from railpaper.experiments.suspension_fault_detection.result import (
 )
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
 from railpaper.models import lateral_16state as L
+from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
 
 #: Offsets of the fault-free records' seeds from ``seed`` (calibration, evaluation).
@@ -182,7 +183,16 @@ def illustration(run: RecordRun, extra: dict, fault: Fault, names: list[str], gr
 
 def run(*, quick: bool = False, progress=None, **params) -> FaultDetectionResult:
     """Run the appendix; ``params`` are the resolved parameters of :data:`SPEC` (``quick`` is
-    not read: ``params`` already hold the quick sizes)."""
+    not read: ``params`` already hold the quick sizes).  Everything runs on one numba and one
+    OpenBLAS thread (:func:`railpaper.threads.one_thread`): the Kalman banks here are a few
+    dozen filters of 16 states, which a second thread does not speed up, and a chapter that
+    shares the machine with another waits for its own threads otherwise."""
+    with one_thread():
+        return _run(params, progress)
+
+
+def _run(params: dict, progress) -> FaultDetectionResult:
+    """:func:`run` on the current threads."""
     validate(params)
     progress = progress or default_progress()
     started = time.perf_counter()
@@ -243,4 +253,4 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
     return out
 
 
-__all__ = ["chosen_faults", "plan", "run", "run_record", "speed_key", "validate"]
+__all__ = ["chosen_faults", "plan", "run", "run_record", "validate"]

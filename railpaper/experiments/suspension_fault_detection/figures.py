@@ -15,13 +15,12 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from railpaper.experiments.display import number
-from railpaper.experiments.suspension_fault_detection.result import NO_FAULT
+from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
 from railpaper.experiments.suspension_fault_detection.tables import (
     DETECTOR_SHORT,
     PARAMETERS,
     fault_short_label,
-    speed_key,
 )
 
 #: Colour and marker of each detector.

@@ -22,6 +22,11 @@ from railpaper.experiments.base import ChapterResult
 NO_FAULT = "none"
 
 
+def speed_key(speed_kmh: float) -> str:
+    """``300kmh`` for 300.0: the speed as it appears in metric names."""
+    return f"{speed_kmh:g}kmh"
+
+
 @dataclass(frozen=True)
 class Fault:
     """One fault of ``data/suspension-fault-detection/faults.toml`` (or the user's own).
@@ -173,4 +178,5 @@ class FaultDetectionResult(ChapterResult):
                 and (detector is None or detector in r.statistics)]
 
 
-__all__ = ["NO_FAULT", "Fault", "FaultDetectionResult", "IllustratedRecord", "RecordRun"]
+__all__ = ["NO_FAULT", "Fault", "FaultDetectionResult", "IllustratedRecord", "RecordRun",
+           "speed_key"]

@@ -15,7 +15,7 @@ SPEC = ChapterSpec(
     paper="",
     notebook="suspension_fault_detection.ipynb",
     quick_sizes="4 records per fault and speed (full: 30), 8 fault-free (full: 60); RBPF on 2 "
-                "record per fault (full: 8) and 2 fault-free (full: 16)",
+                "records per fault (full: 8) and 2 fault-free (full: 16)",
     parameters=[
         P("seed", 0, "int", "first record: fault records use seeds seed … seed + 299, fault-free "
           "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0),

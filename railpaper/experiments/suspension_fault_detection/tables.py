@@ -14,7 +14,7 @@ from __future__ import annotations
 import pandas as pd
 
 from railpaper.experiments.display import markdown, number
-from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
+from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, WITHIN_S
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
@@ -34,11 +34,6 @@ PARAMETERS = {"csy": ("C_sy", r"$C_{sy}$", "secondary lateral damping"),
 
 #: Dash of a cell without a metric.
 NONE = "—"
-
-
-def speed_key(speed_kmh: float) -> str:
-    """``300kmh`` for 300.0: the speed as it appears in metric names."""
-    return f"{speed_kmh:g}kmh"
 
 
 def fault_short_label(fault: Fault, tex: bool = False) -> str:
@@ -183,4 +178,4 @@ def estimate_table(result, params) -> str:
 
 __all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "delay_text", "detection_table",
            "estimate_table", "false_alarm_table", "fault_short_label", "faults_table",
-           "interval_text", "percent", "clean", "speed_key"]
+           "interval_text", "percent", "clean"]

@@ -1,0 +1,69 @@
+"""The fault-detection appendix end to end: its quick run in the session's quick book (outputs,
+CI bands, findings at the top of the page) and a tiny ``railpaper sweep`` against the library
+called directly."""
+
+import json
+
+import pandas as pd
+import pytest
+from conftest import railpaper_cli
+
+from railpaper.experiments.suspension_fault_detection import experiment as chapter
+from railpaper.experiments.suspension_fault_detection.spec import SPEC
+from railpaper.pipeline.check import check_chapter
+from railpaper.pipeline.findings import read_findings
+
+CHAPTER = "suspension-fault-detection"
+pytestmark = pytest.mark.slow
+#: A sweep sample of a few seconds: one speed, one fault, the least records.
+TINY = {"speeds_kmh": [200.0], "faults": "csaly_half", "records_per_fault": 2,
+        "fault_free_records": 4, "rbpf_records_per_fault": 2, "rbpf_fault_free_records": 2,
+        "n_particles": 20}
+
+
+def test_outputs_complete(quick_chapter_dir):
+    out = quick_chapter_dir(CHAPTER)
+    metrics = json.loads((out / "metrics.json").read_text())["metrics"]
+    for det in ("residual", "exact", "rbpf"):
+        assert f"false_alarms_per_hour_{det}_300kmh" in metrics
+        assert f"delay_median_s_{det}_csaly_0_300kmh" in metrics
+    assert "false_alarms_per_hour_rbpf_200kmh" not in metrics          # RBPF: first speed only
+    for row in read_findings(CHAPTER).values():
+        assert {row["metric"], row["n_samples"], *row["interval"]} <= set(metrics)
+    ts = pd.read_csv(out / "timeseries.csv")
+    assert {"t_s", "statistic_exact", "statistic_residual", "rbpf_csaly_relative"} <= set(ts)
+    for fig in ("record_around_fault", "fault_time_posterior", "delay_by_fault", "roc_curves"):
+        assert (out / f"{fig}.png").stat().st_size > 10_000
+
+
+def test_metrics_within_tolerances(quick_chapter_dir):
+    rows = check_chapter(CHAPTER, quick_chapter_dir(CHAPTER))
+    assert rows and all(r.status == "ok" for r in rows), [(r.metric, r.value, r.status)
+                                                           for r in rows if r.status != "ok"]
+
+
+def test_page_opens_with_the_findings(quick_chapter_dir):
+    notebook = json.loads((quick_chapter_dir(CHAPTER) / "suspension_fault_detection.ipynb")
+                          .read_text())
+    text = "".join("".join(c["source"]) for c in notebook["cells"])
+    assert text.index("## Findings") < text.index("## The vehicle and its faults")
+    glued = [o for c in notebook["cells"] for o in c.get("outputs", [])
+             if "findings_table" in json.dumps(o.get("metadata", {}))]
+    assert len(glued) == 1
+    shown = glued[0]["data"]["text/markdown"]
+    shown = shown if isinstance(shown, str) else "".join(shown)
+    assert shown.count("\n| ") == len(read_findings(CHAPTER)) + 1      # header row + one each
+
+
+def test_sweep_equals_the_library(tmp_path):
+    args = [a for name, value in TINY.items() for a in ("-p", name, json.dumps(value))]
+    result = railpaper_cli("sweep", CHAPTER, "--quick", "--seeds", "0,1", "--workers", "1",
+                           "--out", str(tmp_path), *args)
+    assert result.returncode == 0, result.stderr
+    table = pd.read_csv(tmp_path / "results.csv")
+    assert (table.status == "ok").all() and sorted(table.seed) == [0, 1]
+    direct = chapter.run(quick=True, **SPEC.resolve(dict(TINY, seed=1), True)).metrics
+    row = table[table.seed == 1].iloc[0]
+    for key in ("delay_median_s_exact_csaly_half_200kmh", "false_alarms_per_hour_residual_200kmh",
+                "detected_within_2s_rbpf_csaly_half_200kmh"):
+        assert row[key] == pytest.approx(direct[key], rel=1e-12, abs=1e-15)
