@@ -139,7 +139,8 @@ def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
 def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord,
                   theta_ref: np.ndarray | None = None):
     """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
-    with the process noise of the record's input changes and the sensor noise (:func:`filter_noise`);
+    with the process noise of the record's input changes and the sensor noise
+    (:func:`filter_noise`);
     the ZOH's balancing is that of ``theta_ref`` (default: the centre of chapter 003's prior box
     ``prior_low``..``prior_high``; it changes only the rounding)."""
     Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
@@ -148,5 +149,5 @@ def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord
     return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=theta_ref)
 
 
-__all__ = ["LateralRecord", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise", "filter_system", "noise_std",
-           "sampled_record", "simulate_lateral", "track_velocity", "vehicle"]
+__all__ = ["LateralRecord", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise", "filter_system",
+           "noise_std", "sampled_record", "simulate_lateral", "track_velocity", "vehicle"]

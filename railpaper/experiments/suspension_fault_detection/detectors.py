@@ -1,5 +1,6 @@
 """The three detectors of the appendix, each a statistic after every sample of one record
-(alarms, thresholds and delays are :mod:`~railpaper.experiments.suspension_fault_detection.evidence`'s).
+(alarms, thresholds and delays are those of
+:mod:`~railpaper.experiments.suspension_fault_detection.evidence`).
 
 * :func:`residual_cusum` — the classical residual test: the nominal model's Kalman filter, its
   whitened innovations and Page's CUSUM against a growth of their variance

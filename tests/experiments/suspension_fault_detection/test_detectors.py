@@ -80,7 +80,7 @@ def test_exact_posterior_equals_one_filter_per_hypothesis(setup):
 def test_faulted_record_equals_the_fault_free_one_until_the_fault(setup):
     rec, _ = _record(setup, "csaly_half", 200.0, tau=1.5)
     free, _ = _record(setup, None, 200.0, tau=1.5)
-    first = rec.fault_step - 1                                       # row of the first post-fault sample
+    first = rec.fault_step - 1                          # row of the first post-fault sample
     assert rec.fault_step == int(round(1.5 / PARAMS["dt_s"])) + 1
     assert np.array_equal(rec.record.y[:first], free.record.y[:first])
     assert not np.allclose(rec.record.y[first], free.record.y[first])
