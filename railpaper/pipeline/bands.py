@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -202,7 +203,8 @@ def write_bands(chapter: str, quick: bool, bands: dict[str, tuple[float, float, 
              "[meta]", 'parameters = "defaults"', ""]
     for m in ("full", "quick"):
         for metric, entry in doc[m].items():
-            lines.append(f"[{m}.{metric}]")
+            bare = re.fullmatch(r"[A-Za-z0-9_-]+", metric)     # else a quoted TOML key
+            lines.append(f"[{m}.{metric if bare else json.dumps(metric)}]")
             for key in ("min", "max"):
                 if key in entry:
                     lines.append(f"{key} = {_number(entry[key])}")

@@ -12,9 +12,13 @@ same way, on a statistic's 95 % interval over records against a threshold the st
     threshold = 0.9
     side = "above"                                              # "above" or "below" the threshold
     unit = ""                                                   # optional
+    min_samples = 60          # optional: fewer records than this give "undecided" (the size at
+                              # which disjoint seed batches agree on the verdict)
+    note = "..."              # optional: what changed after the evidence was seen, and when
 
 Verdicts: **holds** (the whole interval on the stated side), **fails** (the whole interval on
-the other side), **undecided** (the interval straddles the threshold).  A band test
+the other side), **undecided** (the interval straddles the threshold, or fewer records than
+``min_samples``).  A band test
 (tests/pipeline/test_findings.py) checks that every run passing CI gives the same verdict:
 the CI bands of the interval's ends sit on one side of the threshold.
 """
@@ -24,7 +28,9 @@ from __future__ import annotations
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.outputs import chapter_data_dir
 
-FINDING_KEYS = {"finding", "metric", "interval", "n_samples", "threshold", "side", "unit"}
+FINDING_KEYS = {"finding", "metric", "interval", "n_samples", "threshold", "side", "unit",
+                "min_samples", "note"}
+OPTIONAL_KEYS = {"unit", "min_samples", "note"}
 SIDES = ("above", "below")
 FINDING_VERDICTS = ("holds", "fails", "undecided")
 
@@ -35,7 +41,7 @@ def read_findings(chapter: str) -> dict[str, dict]:
     rows = read_toml(path)
     for key, row in rows.items():
         unknown = set(row) - FINDING_KEYS
-        missing = FINDING_KEYS - {"unit"} - set(row)
+        missing = FINDING_KEYS - OPTIONAL_KEYS - set(row)
         if unknown or missing:
             raise DataError(f"{path}: finding '{key}': "
                             + (f"unknown key '{sorted(unknown)[0]}'" if unknown
@@ -46,8 +52,10 @@ def read_findings(chapter: str) -> dict[str, dict]:
     return rows
 
 
-def verdict(row: dict, low: float, high: float) -> str:
-    """The verdict of a finding whose interval is [low, high]."""
+def verdict(row: dict, low: float, high: float, n: float | None = None) -> str:
+    """The verdict of a finding whose interval is [low, high] over ``n`` records."""
+    if n is not None and n < row.get("min_samples", 0):
+        return "undecided"
     t = row["threshold"]
     above = low > t if row["side"] == "above" else high < t
     other = high < t if row["side"] == "above" else low > t
@@ -57,6 +65,13 @@ def verdict(row: dict, low: float, high: float) -> str:
 def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set[str]:
     """Every verdict a run inside the CI bands could give (one element: the bands decide)."""
     (lo_min, lo_max), (hi_min, hi_max) = (bands[m] for m in row["interval"])
+    if "min_samples" in row:
+        n_min, n_max = bands[row["n_samples"]]
+        if n_max < row["min_samples"]:
+            return {"undecided"}
+        if n_min < row["min_samples"]:
+            return {"undecided"} | verdicts_over_bands(
+                {k: v for k, v in row.items() if k != "min_samples"}, bands)
     t, out = row["threshold"], set()
     if row["side"] == "above":
         if lo_max > t:
@@ -80,8 +95,9 @@ def judged(chapter: str, metrics: dict) -> list[dict]:
     out = []
     for key, row in read_findings(chapter).items():
         low, high = (metrics[m] for m in row["interval"])
-        out.append(dict(row, key=key, value=metrics[row["metric"]], low=low, high=high,
-                        n=metrics[row["n_samples"]], verdict=verdict(row, low, high)))
+        n = metrics[row["n_samples"]]
+        out.append(dict(row, key=key, value=metrics[row["metric"]], low=low, high=high, n=n,
+                        verdict=verdict(row, low, high, n)))
     return out
 
 
@@ -92,9 +108,12 @@ def findings_markdown(chapter: str, metrics: dict) -> str:
     for f in judged(chapter, metrics):
         unit = f" {f['unit']}" if f.get("unit") else ""
         word = "more than" if f["side"] == "above" else "less than"
-        lines.append(f"| {f['finding']} | {word} {f['threshold']:g}{unit} | "
+        needs = (f" (needs {f['min_samples']:g} records to be decided)"
+                 if f["n"] < f.get("min_samples", 0) else "")
+        note = f" *{f['note']}*" if f.get("note") else ""
+        lines.append(f"| {f['finding']}{note} | {word} {f['threshold']:g}{unit} | "
                      f"{f['value']:.3g} [{f['low']:.3g}, {f['high']:.3g}], n = {f['n']:g} | "
-                     f"**{f['verdict']}** |")
+                     f"**{f['verdict']}**{needs} |")
     return "\n".join(lines) + "\n"
 
 

@@ -28,6 +28,16 @@ def test_verdict_reads_the_whole_interval():
                                                                                  "undecided"}
 
 
+def test_fewer_records_than_the_minimum_give_undecided():
+    row = {"threshold": 0.5, "side": "above", "interval": ["lo", "hi"], "n_samples": "n",
+           "min_samples": 60}
+    assert verdict(row, 0.6, 0.9, n=30) == "undecided" and verdict(row, 0.6, 0.9, n=60) == "holds"
+    bands = {"lo": (0.6, 0.8), "hi": (0.9, 1.0)}
+    assert verdicts_over_bands(row, dict(bands, n=(30, 30))) == {"undecided"}
+    assert verdicts_over_bands(row, dict(bands, n=(60, 60))) == {"holds"}
+    assert verdicts_over_bands(row, dict(bands, n=(30, 60))) == {"holds", "undecided"}
+
+
 @pytest.mark.parametrize("mode", ["full", "quick"])
 @pytest.mark.parametrize("chapter", OURS)
 def test_bands_decide_every_finding(chapter, mode):

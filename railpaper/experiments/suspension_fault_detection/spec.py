@@ -15,7 +15,7 @@ SPEC = ChapterSpec(
     paper="",
     notebook="suspension_fault_detection.ipynb",
     quick_sizes="4 records per fault and speed (full: 30), 8 fault-free (full: 60); RBPF on 2 "
-                "records per fault (full: 8) and 2 fault-free (full: 16)",
+                "records per fault (full: 12) and 2 fault-free (full: 16)",
     parameters=[
         P("seed", 0, "int", "first record: fault records use seeds seed … seed + 299, fault-free "
           "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0),
@@ -47,7 +47,7 @@ SPEC = ChapterSpec(
           "fault-free records), 1", positive=True),
         P("cusum_variance_ratio", 2.0, "float", "residual test: the growth of the whitened "
           "innovations' variance its CUSUM is tuned to, 1", positive=True),
-        P("rbpf_records_per_fault", 8, "int", "records per fault (the first ones, first speed) "
+        P("rbpf_records_per_fault", 12, "int", "records per fault (the first ones, first speed) "
           "also filtered by the RBPF", quick=2, minimum=2),
         P("rbpf_fault_free_records", 16, "int", "fault-free records (first speed) filtered by "
           "the RBPF: half set its threshold, half measure its false alarms", quick=2, minimum=2),
