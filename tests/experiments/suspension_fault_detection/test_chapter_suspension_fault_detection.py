@@ -1,6 +1,6 @@
 """The fault-detection appendix end to end: its quick run in the session's quick book (outputs,
-CI bands, findings at the top of the page) and a tiny ``railpaper sweep`` against the library
-called directly."""
+CI bands, findings at the top of the page) and a one-sample ``railpaper sweep`` against the
+library called directly."""
 
 import json
 
@@ -50,20 +50,20 @@ def test_page_opens_with_the_findings(quick_chapter_dir):
     glued = [o for c in notebook["cells"] for o in c.get("outputs", [])
              if "findings_table" in json.dumps(o.get("metadata", {}))]
     assert len(glued) == 1
-    shown = glued[0]["data"]["text/markdown"]
+    shown = glued[0]["data"]["application/papermill.record/text/markdown"]
     shown = shown if isinstance(shown, str) else "".join(shown)
     assert shown.count("\n| ") == len(read_findings(CHAPTER)) + 1      # header row + one each
 
 
 def test_sweep_equals_the_library(tmp_path):
     args = [a for name, value in TINY.items() for a in ("-p", name, json.dumps(value))]
-    result = railpaper_cli("sweep", CHAPTER, "--quick", "--seeds", "0,1", "--workers", "1",
+    result = railpaper_cli("sweep", CHAPTER, "--quick", "--seeds", "1", "--workers", "1",
                            "--out", str(tmp_path), *args)
     assert result.returncode == 0, result.stderr
     table = pd.read_csv(tmp_path / "results.csv")
-    assert (table.status == "ok").all() and sorted(table.seed) == [0, 1]
+    assert (table.status == "ok").all() and list(table.seed) == [1]
     direct = chapter.run(quick=True, **SPEC.resolve(dict(TINY, seed=1), True)).metrics
-    row = table[table.seed == 1].iloc[0]
+    row = table.iloc[0]
     for key in ("delay_median_s_exact_csaly_half_200kmh", "false_alarms_per_hour_residual_200kmh",
                 "detected_within_2s_rbpf_csaly_half_200kmh"):
         assert row[key] == pytest.approx(direct[key], rel=1e-12, abs=1e-15)
