@@ -36,8 +36,9 @@ SIGNAL_AFTER_S = 2.0          # after the staging directory appears: the kernel 
 # Runs to be interrupted simulate 30 s of track (about a minute on a quiet machine): they must still
 # be running when the signal comes, however loaded the machine is.
 LONG = ["-p", "duration_s", "30"]
-# The first run holds the chapter's lock while a second run is refused: 8 s of track (about 30 s).
-MEDIUM = ["-p", "duration_s", "8"]
+# The first run holds the chapter's lock while a second run is refused: 4 s of track (about 15 s;
+# the refusal comes within the second run's start-up, a few seconds).
+MEDIUM = ["-p", "duration_s", "4"]
 
 # (id, arguments, exit status, key words of the one line).  {OUT}: an output directory holding a
 # previous run's files (must stay byte-identical); {CSV}: a measurement CSV written for the case;
@@ -121,14 +122,7 @@ MATRIX = [
     # the fault-detection appendix: a fault time outside the record, a factor <= 0, a name
     ("run-fault-time-outside", ["run", SFD, "-p", "fault_time_s", "9", "--out", "{OUT}"], 2,
      ["'fault_time_s' = 9 s lies outside the record"]),
-    ("run-fault-factor-zero", ["run", SFD, "-p", "extra_fault_parameter", "csaly",
-                               "-p", "extra_fault_factor", "0", "--out", "{OUT}"], 2,
-     ["'extra_fault_factor' must be > 0"]),
-    ("run-fault-unknown-parameter", ["run", SFD, "-p", "extra_fault_parameter", "c_saly",
-                                     "--out", "{OUT}"], 2,
-     ["unknown parameter 'c_saly'", "csaly"]),
-    ("run-fault-unknown-name", ["run", SFD, "-p", "faults", "csaly_half,damper",
-                                "--out", "{OUT}"], 2, ["unknown fault 'damper'", "csaly_half"]),
+    # (the appendix's other refusals, in process: tests/experiments/suspension_fault_detection)
     # run: measurement CSV (rbpf-parameter-estimation)
     ("csv-missing-file", ["run", RBPF, "--quick", "-p", "measurements_csv", "no-such-file.csv",
                           "--out", "{OUT}"], 2, ["measurements_csv", "cannot read"]),
@@ -460,7 +454,7 @@ def test_interrupted_sweep_keeps_finished_samples(tmp_path, signum):
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and process.poll() is None:
         results = out / "results.csv"
-        if results.exists() and len(results.read_text().splitlines()) >= 3:   # 2 samples done
+        if results.exists() and len(results.read_text().splitlines()) >= 2:   # a sample done
             break
         time.sleep(0.1)
     assert process.poll() is None, process.communicate()
@@ -472,7 +466,7 @@ def test_interrupted_sweep_keeps_finished_samples(tmp_path, signum):
                       f"in {out / 'results.csv'}; the same command resumes"], stderr[-3000:]
     assert process.returncode == 128 + signum
     table = pd.read_csv(out / "results.csv")
-    assert len(table) >= 2 and (table.status == "ok").all()
+    assert len(table) >= 1 and (table.status == "ok").all()
 
 
 # ------------------------------------------------------------------------ the sample-time bound

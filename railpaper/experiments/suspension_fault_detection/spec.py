@@ -14,8 +14,9 @@ SPEC = ChapterSpec(
     title="How soon does a failed damper show in the data? Abrupt suspension faults",
     paper="",
     notebook="suspension_fault_detection.ipynb",
-    quick_sizes="4 records per fault and speed (full: 30), 8 fault-free (full: 60); RBPF on 2 "
-                "records per fault (full: 12) and 2 fault-free (full: 16)",
+    quick_sizes="3 records per fault and speed (full: 30), 6 fault-free (full: 60); RBPF with 40 "
+                "particles (full: 100) on 2 records per fault (full: 12) and 2 fault-free (full: "
+                "16)",
     parameters=[
         P("seed", 0, "int", "first record: fault records use seeds seed … seed + 299, fault-free "
           "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0),
@@ -38,10 +39,10 @@ SPEC = ChapterSpec(
           minimum=1),
         *TRACK_AND_SENSORS,
         P("records_per_fault", 30, "int", "records per fault and speed (Monte Carlo samples, at "
-          "most 300)", quick=4, minimum=2),
+          "most 300)", quick=3, minimum=2),
         P("fault_free_records", 60, "int", "fault-free records per speed: the first half sets "
           "each detector's threshold, the second half measures its false alarms (at most 600)",
-          quick=8, minimum=4),
+          quick=6, minimum=4),
         P("false_alarm_probability", 0.05, "float", "each detector's threshold: the probability "
           "of an alarm in a fault-free record's monitoring window (set on the first half of the "
           "fault-free records), 1", positive=True),
@@ -51,7 +52,7 @@ SPEC = ChapterSpec(
           "also filtered by the RBPF", quick=2, minimum=2),
         P("rbpf_fault_free_records", 16, "int", "fault-free records (first speed) filtered by "
           "the RBPF: half set its threshold, half measure its false alarms", quick=2, minimum=2),
-        P("n_particles", 100, "int", "RBPF particles", minimum=2),
+        P("n_particles", 100, "int", "RBPF particles", quick=40, minimum=2),
         P("paper_delta", 0.98, "float", "Liu-West delta of the RBPF (paper 003's scheme), 1",
           positive=True),
         P("prior_low", 0.5, "float", "RBPF's initial cloud: lower edge, fraction of the nominal "

@@ -7,6 +7,7 @@ definitions."""
 import numpy as np
 import pytest
 
+from railpaper.experiments.base import ParameterError
 from railpaper.engine.kalman import predict, update
 from railpaper.experiments.lateral_vehicle import track_velocity
 from railpaper.experiments.suspension_fault_detection import detectors, evidence, faults, records
@@ -116,6 +117,21 @@ def test_a_hunting_record_ends_before_flange_contact(setup):
     assert rec.flange_contact and rec.end_step < PARAMS["duration_s"] / PARAMS["dt_s"]
     assert not stable.flange_contact and len(stable.record.y) == stable.end_step
     assert len(rec.record.y) == rec.end_step and rec.end_step > rec.fault_step
+
+
+@pytest.mark.parametrize("overrides, words", [
+    ({"extra_fault_parameter": "csaly", "extra_fault_factor": 0}, "must be > 0"),
+    ({"extra_fault_parameter": "c_saly"}, "unknown parameter 'c_saly'"),
+    ({"faults": "csaly_half,damper"}, "unknown fault 'damper'"),
+    ({"fault_time_s": 1.25}, "not on the prior's grid"),
+    ({"duration_s": 3.0}, "must be >= 4 s"),
+    ({"speeds_kmh": [300.0], "dt_s": 0.05}, "'dt_s'"),
+])
+def test_bad_parameters_are_refused_in_one_line(overrides, words):
+    """Before any work (the CLI's one line and exit 2 are tests/pipeline/test_hardening.py's)."""
+    with pytest.raises(ParameterError) as error:
+        chapter.validate(SPEC.resolve(overrides, True))
+    assert words in str(error.value) and "\n" not in str(error.value)
 
 
 def test_threshold_allows_at_most_the_false_alarm_probability():
