@@ -13,7 +13,8 @@ venv: $(BIN)/railpaper $(MATHJAX)
 
 $(BIN)/railpaper: environment.lock pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r environment.lock
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps --no-compile -r environment.lock
+	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib > /dev/null
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(BIN)/railpaper
 

@@ -56,18 +56,21 @@ def module_name(path: Path, package_dir: Path) -> str:
     return ".".join(parts)
 
 
+def _nodes(node: ast.AST, inner: bool = False):
+    """Every node below ``node`` with whether a function (or lambda) encloses it: one pass."""
+    inside = inner or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+    for child in ast.iter_child_nodes(node):
+        yield child, inside
+        yield from _nodes(child, inside)
+
+
 def imports(path: Path, package_dir: Path) -> list[tuple[int, str, bool]]:
     """(line, dotted module, inside a function) of every import in the file at ``path``."""
     tree = ast.parse(path.read_text(), filename=str(path))
     dotted = module_name(path, package_dir)
     package = dotted if path.name == "__init__.py" else dotted.rsplit(".", 1)[0]
-    in_function = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-            in_function |= {id(n) for n in ast.walk(node) if n is not node}
     found = []
-    for node in ast.walk(tree):
-        inner = id(node) in in_function
+    for node, inner in _nodes(tree):
         if isinstance(node, ast.Import):
             found += [(node.lineno, alias.name, inner) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
