@@ -15,8 +15,10 @@ posterior probability that the change has happened by step k (an on-line alarm s
 
     P(τ ≤ k | y_1..k) = Σ_{τ_j ≤ k} π_vj e^{ℓ_vj(k)} / (Σ_{τ_j ≤ k} π_vj e^{ℓ_vj(k)} + (π_∅ + Σ_{τ_j > k} π_vj) e^{ℓ₀(k)})
 
-(log-sum-exp throughout).  No particle approximates τ or v: the only approximation is the grid
-(a change between grid steps is attributed to a neighbouring one).  Cost: Σ_j V (K − τ_j) filter
+(log-sum-exp throughout).  No particle approximates τ or v: for the filters' model the only
+approximation is the grid (a change between grid steps is attributed to a neighbouring one);
+data from another model (a finer truth, an input held differently) are filtered exactly under
+this one.  Cost: Σ_j V (K − τ_j) filter
 steps, i.e. about V J K / 2.
 
 Example (a scalar AR(1) whose coefficient jumps from 0.9 to −0.5 at step 60)::
