@@ -21,10 +21,10 @@ from pathlib import Path
 
 from railpaper.pipeline.chapters import PipelineError, ensure_kernel, run_chapter
 
-#: Chapters by their default run's wall time on one core, longest first (measured 2026-12-04 in
-#: a two-job build: 548 s, 502 s, 104 s, 46 s); a chapter not listed starts last.
-LONGEST_FIRST = ("rbpf-parameter-estimation", "quasi-gaussian-rbpf", "reduced-order-observer",
-                 "suspension-fault-detection", "partial-state-observer")
+#: Chapters by their default run's wall time on one core, longest first (measured 2026-12-05 in
+#: a two-job build: 332 s, about 300 s, 105 s, 70 s, 25 s); a chapter not listed starts last.
+LONGEST_FIRST = ("rbpf-parameter-estimation", "quasi-gaussian-rbpf", "suspension-fault-detection",
+                 "reduced-order-observer", "partial-state-observer")
 
 #: Set for the chapters of a build that runs several at once: a chapter's Monte Carlo sweep
 #: (:func:`railpaper.pipeline.sweep.notebook_sweep`) then uses one worker process, the one core
