@@ -141,7 +141,8 @@ def compute_bands(chapter: str, quick: bool, batches: int = 10, stride: int = DE
                   work_dir: str | Path | None = None, metrics: list[str] | None = None,
                   widen: float = 0.25) -> dict[str, tuple[float, float, str]]:
     """Bands of ``metrics`` (default: every metric a claim rule reads, and every metric already
-    banded for this mode; for a chapter of our own, every metric of the run) from ``batches``
+    banded for this mode; for a chapter of our own, every metric of its metrics.json) from
+    ``batches``
     chapter runs with seeds 0, stride, 2·stride, …"""
     if batches < 2:
         raise ValueError(f"bands need at least 2 batches, got {batches}")
@@ -159,7 +160,9 @@ def compute_bands(chapter: str, quick: bool, batches: int = 10, stride: int = DE
               file=sys.stderr, flush=True)
         runs.append(_batch_metrics(chapter, quick, seed, work))
     if not chapter_spec(chapter).paper and not list(metrics):
-        metrics = sorted(runs[0])                   # a chapter of our own: every metric
+        # a chapter of our own: every metric of metrics.json (not the wall clock of timings.json)
+        first = json.loads((work / f"seed-{seeds[0]}" / "metrics.json").read_text())
+        metrics = sorted(first["metrics"])
     metrics = list(dict.fromkeys(metrics))
     thresholds = rule_thresholds(chapter)
     out = {}
