@@ -249,7 +249,7 @@ def simulate_truth_with_change(fixed: dict, theta_before, theta_after, change_st
 def simulate_truth_schedule(fixed: dict, thetas, starts, speed_mps: float, dt_fine_s: float,
                             u_fine: np.ndarray) -> np.ndarray:
     """:func:`simulate_truth` with θ piecewise constant: ``thetas[s]`` from fine step
-    ``starts[s]`` + 1 on (``starts[0]`` = 0, strictly increasing), the state carried across
+    ``starts[s]`` + 1 on (``starts[0]`` = 0, never decreasing), the state carried across
     every change (a damper failing at once is two pieces; a gradual loss, many).
 
     Returns ``x`` (K+1, 16) as :func:`simulate_truth`.

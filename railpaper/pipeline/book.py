@@ -16,7 +16,6 @@ from railpaper.pipeline.chapters import (
     PipelineError,
     book_chapters,
     chapter_spec,
-    paper_chapters,
     run_chapter,
 )
 from railpaper.pipeline.ledger import write_ledger
@@ -103,7 +102,7 @@ def build_book(quick: bool = False, book_dir: str | Path | None = None,
             print(f"railpaper: running chapter {name}{' (quick)' if quick else ''}",
                   file=sys.stderr)
             run_chapter(name, {}, quick, book / "chapters" / name, progress=progress, page=False)
-    write_ledger(book, [name for name in chapters if name in paper_chapters()])
+    write_ledger(book, [name for name in chapters if chapter_spec(name).paper])
     write_environment(book)
     if (book / "performance.md").exists():
         print("railpaper: engine benchmark (quick) for the performance page", file=sys.stderr)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from railpaper.engine.residual_alarms import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S
 from railpaper.stats import median_interval, quantile_ranks, rate
@@ -53,8 +54,8 @@ def threshold(maxima: np.ndarray, false_alarm_probability: float) -> float:
 
 def alarm_time_s(statistic: np.ndarray, h: float, first_row: int, dt_s: float) -> float:
     """Time of the first sample in the window at or above ``h`` (inf: none)."""
-    hits = np.flatnonzero(statistic[first_row:] >= h)
-    return float((first_row + hits[0] + 1) * dt_s) if hits.size else np.inf
+    row = first_alarm(statistic[first_row:], h)
+    return float((first_row + row + 1) * dt_s) if row >= 0 else np.inf
 
 
 def censored_median(delays) -> tuple[float, float, float]:

@@ -12,7 +12,7 @@ reaches flange contact: the linear model has no flange.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -77,8 +77,7 @@ def simulate_faulted(params: dict, settings: dict, fixed: dict, theta: np.ndarra
     contact = L.flange_contact_step(states, settings["flange_clearance_m"])
     end = K if contact < 0 else min(K, (contact - 1) // sub)
     if end < K:
-        record = LateralRecord(seed=record.seed, y=record.y[:end], u_mps=record.u_mps[:end],
-                               du_var_m2ps2=record.du_var_m2ps2, u_var_m2ps2=record.u_var_m2ps2)
+        record = replace(record, y=record.y[:end], u_mps=record.u_mps[:end])
     j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
     factor = (np.ones(end) if j is None else
               np.array([th[j] for th in thetas])[piece[:end]] / theta[j])
