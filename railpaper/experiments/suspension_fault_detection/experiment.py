@@ -131,8 +131,8 @@ def fault_time(params: dict, grid_s: np.ndarray, seed: int) -> float:
 
 
 def run_record(params: dict, settings: dict, fixed: dict, theta: np.ndarray, fault: Fault | None,
-               role: str, speed_kmh: float, seed: int, values: np.ndarray, names: list[str],
-               with_rbpf: bool) -> tuple[RecordRun, dict]:
+               role: str, speed_kmh: float, seed: int, values: np.ndarray, with_rbpf: bool
+               ) -> tuple[RecordRun, dict]:
     """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
     what the illustration needs (RBPF estimates, the exact posterior's fault time and value)."""
     grid_s = faults.fault_times_s(settings)
@@ -216,7 +216,7 @@ def _run(params: dict, progress) -> FaultDetectionResult:
             t0 = time.perf_counter()
             use_rbpf = with_rbpf and s == 0
             run_, extra = run_record(params, settings, fixed, theta, by_name.get(fault_name),
-                                     role, speed, seed, values, names, use_rbpf)
+                                     role, speed, seed, values, use_rbpf)
             spent["rbpf" if use_rbpf else "other"] += time.perf_counter() - t0
             records_.append(run_)
             if illustrated is None and s == 0 and role == "fault":
