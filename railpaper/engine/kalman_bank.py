@@ -39,6 +39,7 @@ import numpy as np
 
 from railpaper.engine.batch_expm import stack_matmul
 from railpaper.engine.kalman import LOG_2PI
+from railpaper.engine.kernel_arrays import kernel_array
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 
 BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
@@ -350,7 +351,7 @@ def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
     if M is None:
         return np.zeros((1,) + shape)
     M = np.asarray(M, float)
-    return np.ascontiguousarray(M if M.ndim == 3 else M[None])
+    return kernel_array(M if M.ndim == 3 else M[None])
 
 
 def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.ndarray,
@@ -387,27 +388,27 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     x_hist, var_hist : (N, K, n)
         Posterior means and the diagonals of the posterior covariances (``record`` only).
     """
-    x = np.ascontiguousarray(x, dtype=float)
+    x = kernel_array(x)
     N, n = x.shape
     if ancestors is None:
         ancestors = np.arange(N)
     else:
-        ancestors = np.ascontiguousarray(ancestors, dtype=np.int64)
+        ancestors = kernel_array(ancestors, np.int64)
         if ancestors.ndim != 1 or (ancestors.size
                                    and not 0 <= ancestors.min() <= ancestors.max() < N):
             raise ValueError(f"kalman_run: ancestors must be indices into the {N} filters")
         N = len(ancestors)
-    Y = np.ascontiguousarray(np.atleast_2d(np.asarray(Y, float)))
+    Y = kernel_array(np.atleast_2d(np.asarray(Y, float)))
     K = Y.shape[0]
     p = system.H.shape[-2]
     B = system.B
     if B is None or U is None:
         B, U = None, np.zeros((K, 1))
-    U = np.ascontiguousarray(np.asarray(U, float).reshape(K, -1))
+    U = kernel_array(np.asarray(U, float).reshape(K, -1))
     x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty((N, K))
     hist_shape = (N, K, n) if record else (0, 0, 0)
     x_hist, var_hist = np.empty(hist_shape), np.empty(hist_shape)
-    _kf_run(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
+    _kf_run(x, kernel_array(P), _stack(system.F, (n, n)),
             _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, _stack(system.H, (p, n)),
             _stack(system.R, (p, p)), Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
             record, block_size(N))
@@ -453,7 +454,7 @@ def _indices(a: np.ndarray | None, N: int, default: int, name: str) -> np.ndarra
     """``a`` as int64 indices into N rows (filters or matrices; default 0..default−1)."""
     if a is None:
         return np.arange(default)
-    a = np.ascontiguousarray(a, dtype=np.int64)
+    a = kernel_array(a, np.int64)
     if a.ndim != 1 or (a.size and not 0 <= a.min() <= a.max() < N):
         raise ValueError(f"kalman_predict: {name} must be indices into {N} rows")
     return a
@@ -486,21 +487,21 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     log_likelihood : (N,)
         ``log N(y; H x⁻, H P⁻ Hᵀ + R)``; −inf where that S is not positive definite.
     """
-    x = np.ascontiguousarray(x, dtype=float)
+    x = kernel_array(x)
     N, n = x.shape
     ancestors = _indices(ancestors, N, N, "ancestors")
     N = len(ancestors)
     batch = max([M.shape[0] for M in (system.F, system.Q, system.H, system.R, system.B)
                  if M is not None and M.ndim == 3] or [N])      # shared: any row
     matrix_rows = _indices(matrix_rows, batch, N, "matrix_rows")
-    y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
+    y = kernel_array(np.asarray(y, float).reshape(-1))
     p = system.H.shape[-2]
     B = system.B
     if B is None or u is None:
         B, u = None, np.zeros(1)
-    u = np.ascontiguousarray(np.asarray(u, float).reshape(-1))
+    u = kernel_array(np.asarray(u, float).reshape(-1))
     x_prior, P_prior, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
-    _kf_predict(x, np.ascontiguousarray(P, dtype=float), _stack(system.F, (n, n)),
+    _kf_predict(x, kernel_array(P), _stack(system.F, (n, n)),
                 _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, _stack(system.H, (p, n)),
                 _stack(system.R, (p, p)), y, ancestors, matrix_rows, x_prior, P_prior,
                 loglik, block_size(N))
@@ -532,11 +533,11 @@ def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np
         ``log N(y; H x⁻, H P⁻ Hᵀ + R)`` with these H, R.  Where S is not positive definite
         that filter is not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf.
     """
-    x_prior = np.ascontiguousarray(x_prior, dtype=float)
+    x_prior = kernel_array(x_prior)
     N, n = x_prior.shape
-    y = np.ascontiguousarray(np.asarray(y, float).reshape(-1))
+    y = kernel_array(np.asarray(y, float).reshape(-1))
     p = y.shape[0]
     x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
-    _kf_update(x_prior, np.ascontiguousarray(P_prior, dtype=float), _stack(H, (p, n)),
+    _kf_update(x_prior, kernel_array(P_prior), _stack(H, (p, n)),
                _stack(R, (p, p)), y, x_out, P_out, loglik, block_size(N))
     return x_out, P_out, loglik

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from railpaper.engine.kernel_arrays import kernel_array
+
 
 @dataclass(frozen=True)
 class Gains:
@@ -154,11 +156,10 @@ def gains(F: np.ndarray, Q: np.ndarray, H: np.ndarray, R: np.ndarray, P0: np.nda
     F, Q, H, R, P = (np.asarray(M, float) for M in (F, Q, H, R, P0))
     G = max(len(M) if M.ndim == 3 else 1 for M in (F, Q, R, P))
     n, p = H.shape[1], H.shape[0]
-    F, Q, R, P = (np.ascontiguousarray(np.broadcast_to(M, (G,) + M.shape[-2:]))
-                  for M in (F, Q, R, P))
+    F, Q, R, P = (kernel_array(np.broadcast_to(M, (G,) + M.shape[-2:])) for M in (F, Q, R, P))
     K, M = np.empty((n_steps, G, n, p)), np.empty((n_steps, G, n, p))
     P_post = np.empty((n_steps, G, n, n))
-    _riccati_kernel(F, Q, np.ascontiguousarray(H), R, P, K, M, P_post)
+    _riccati_kernel(F, Q, kernel_array(H), R, P, K, M, P_post)
     return Gains(K=K, M=M, P_post=P_post)
 
 
@@ -220,7 +221,7 @@ def _smoother_kernel(K, M, P_post, F, H, innovations, x_post, out):
 
 def _per_model(g: Gains, F) -> np.ndarray:
     G = g.K.shape[1]
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(F, float), (G,) + np.shape(F)[-2:]))
+    return kernel_array(np.broadcast_to(np.asarray(F, float), (G,) + np.shape(F)[-2:]))
 
 
 def filter_means(g: Gains, F: np.ndarray, H: np.ndarray, y: np.ndarray,
@@ -245,15 +246,15 @@ def filter_means(g: Gains, F: np.ndarray, H: np.ndarray, y: np.ndarray,
     innovations : ndarray, shape (T, G, S, p)
         ``y_k − H x⁻_k`` (the smoother's input).
     """
-    y = np.ascontiguousarray(y, dtype=float)
+    y = kernel_array(y)
     if y.ndim != 4 or y.shape[1] != g.K.shape[1] or len(y) > len(g.K):
         raise ValueError(f"y must have shape (T ≤ {len(g.K)}, G = {g.K.shape[1]}, S, p), "
                          f"got {y.shape}")
     F = _per_model(g, F)
-    x0 = np.ascontiguousarray(np.broadcast_to(np.asarray(x0, float), y.shape[1:3] + (F.shape[-1],)))
+    x0 = kernel_array(np.broadcast_to(np.asarray(x0, float), y.shape[1:3] + (F.shape[-1],)))
     out = np.empty(y.shape[:3] + (F.shape[-1],))
     innovations = np.empty_like(y)
-    _filter_kernel(g.K, F, np.ascontiguousarray(H, dtype=float), y, x0, out, innovations)
+    _filter_kernel(kernel_array(g.K), F, kernel_array(H), y, x0, out, innovations)
     return out, innovations
 
 
@@ -262,6 +263,7 @@ def smoother_means(g: Gains, F: np.ndarray, H: np.ndarray, innovations: np.ndarr
     """Smoothed means ``x_{k|T}``, shape (T, G, S, n), from the filtered means and innovations
     of :func:`filter_means` (the whole record: offline)."""
     out = np.empty_like(x_post)
-    _smoother_kernel(g.K, g.M, g.P_post, _per_model(g, F), np.ascontiguousarray(H, dtype=float),
-                     np.ascontiguousarray(innovations), np.ascontiguousarray(x_post), out)
+    _smoother_kernel(kernel_array(g.K), kernel_array(g.M), kernel_array(g.P_post),
+                     _per_model(g, F), kernel_array(H), kernel_array(innovations),
+                     kernel_array(x_post), out)
     return out
