@@ -28,6 +28,33 @@ def rendered_dom(page: Path, profile: Path) -> tuple[str, list[str]]:
     return result.stdout, errors
 
 
+#: Appended to a copy of a page: after load, the width of every table in the article and of
+#: the box that shows it (the theme scrolls a wider table, so its right edge is cut off).
+TABLE_PROBE = """<script>window.addEventListener('load', () => {
+  const sizes = [...document.querySelectorAll('article table')].map(t => {
+    const box = t.closest('.pst-scrollable-table-container') || t.parentElement;
+    return Math.ceil(t.getBoundingClientRect().width) + '/' + box.clientWidth; });
+  document.body.setAttribute('data-table-widths', sizes.join(',')); });</script>"""
+
+
+def table_widths(page: Path, profile: Path, window_px: int = 1280) -> list[tuple[int, int]]:
+    """(table width, width of the box that shows it), in pixels, of every table of ``page`` in
+    a ``window_px``-wide headless Chromium window."""
+    probe = page.with_name(f"_widths_{page.name}")
+    probe.write_text(page.read_text().replace("</body>", TABLE_PROBE + "</body>"))
+    try:
+        dom = subprocess.run([shutil.which("chromium") or shutil.which("chromium-browser"),
+                              *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                              f"--window-size={window_px},1000", "--virtual-time-budget=10000",
+                              "--dump-dom", probe.as_uri()],
+                             capture_output=True, text=True, timeout=120).stdout
+    finally:
+        probe.unlink()
+    found = re.search(r'data-table-widths="([^"]*)"', dom)
+    assert found, "the page's tables were not measured"
+    return [tuple(int(v) for v in pair.split("/")) for pair in found.group(1).split(",") if pair]
+
+
 def ledger_rows(html: str) -> list[str]:
     """Text of the table rows that carry a verdict badge, in page order."""
     rows = re.findall(r"<tr[^>]*>(.*?)</tr>", html, re.S)
@@ -123,3 +150,11 @@ def test_no_decided_verdict_while_its_interval_straddles_a_threshold(built_book)
                 problems.append(f"{row.chapter} {row.key}: says {row.verdict} while its interval "
                                 f"[{values[low]:.4g}, {values[high]:.4g}] holds {sorted(seen)}")
     assert checked > 30 and not problems, "\n".join(problems)
+
+
+def test_performance_tables_fit_a_1280_pixel_window(built_book, tmp_path):
+    """The Performance page's tables are no wider than the text column in a 1280-pixel
+    window (its results table had eight columns and was cut at the right edge)."""
+    widths = table_widths(built_book / "performance.html", tmp_path / "profile")
+    assert len(widths) >= 3, widths                    # results, baselines, goals
+    assert all(table <= box for table, box in widths), widths
