@@ -34,10 +34,10 @@ def possible_horizons(study: ReadingsStudy, reading: str, par: str, step: int) -
 
 
 def readings_table(study: ReadingsStudy) -> str:
-    """Markdown: per reading, the settling step of ``a`` at each horizon (median [95 %]) and the
-    posterior's absolute error and std of ``a`` at step 55 (no ``|`` inside a cell: it would
-    end the cell)."""
-    head = ["reading", "Q, R variance", "P0 std"] + [
+    """Markdown: per reading (its label gives Q, R and P0), the settling step of ``a`` at each
+    horizon (median [95 %]) and the posterior's absolute error and std of ``a`` at step 55 (no
+    ``|`` inside a cell: it would end the cell)."""
+    head = ["reading"] + [
         f"settling step of a, {h}-step figure" for h in study.horizons_steps] + [
         "abs. error of a at step 55 (median)", "posterior std of a at step 55 (median)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -45,8 +45,7 @@ def readings_table(study: ReadingsStudy) -> str:
         rows = study.table[(study.table.reading == reading.key) & (study.table.parameter == "a")]
         err = study.errors[(study.errors.reading == reading.key)
                            & (study.errors.parameter == "a")].iloc[0]
-        cells = [reading.label, f"{reading.q_var:.3g}, {reading.r_var:.3g}",
-                 f"{reading.p0_std:.3g}"]
+        cells = [reading.label]
         cells += [f"{r.settling_step:g} [{r.settling_step_low:g}, {r.settling_step_high:g}]"
                   for r in rows.itertuples()]
         cells += [f"{err.abs_error_rbpf_step:.3g}", f"{err.std_rbpf_step:.3g}"]
