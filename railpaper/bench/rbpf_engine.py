@@ -32,6 +32,7 @@ from railpaper.bench.flops import step_budget
 from railpaper.discretise import zoh
 from railpaper.engine import rbpf as rbpf_module
 from railpaper.engine.ibis import run_ibis
+from railpaper.engine.kalman_bank import kalman_run
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF
 from railpaper.engine.rbpf import RaoBlackwellisedPF
@@ -183,6 +184,30 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
     medians = np.median(np.array(per_step), axis=0) * 1e3
     return dict(zip(("kalman_bank_ms", "zoh_all_particles_ms", "rest_of_paper_scheme_step_ms"),
                     (float(v) for v in medians)))
+
+
+def bank_call_cost(prob: dict, N: int, repeats: int, steps: int = 32) -> dict:
+    """Milliseconds of the Kalman bank at N on the paper scheme's particles after
+    PROFILE_WARMUP steps: a one-step call, a step inside a ``steps``-step call, and their
+    difference, the fixed cost of a call (copying every filter's x, P, F and H between the
+    library's particle-first arrays and the kernel's blocks, and back); medians over
+    ``repeats`` interleaved pairs."""
+    filt = make_filter(prob, "rbpf-paper", N)
+    for k in range(PROFILE_WARMUP):
+        filt.step(prob["y"][k], prob["u"][k])
+    x, P = (filt.x, filt.P) if filt.ancestors is None else \
+        (filt.x[filt.ancestors], filt.P[filt.ancestors])
+    Y, U = prob["y"][PROFILE_WARMUP:PROFILE_WARMUP + steps], \
+        prob["u"][PROFILE_WARMUP:PROFILE_WARMUP + steps]
+
+    def call(k):
+        t0 = time.perf_counter()
+        kalman_run(x, P, filt.sys, Y[:k], U[:k])
+        return time.perf_counter() - t0
+    t = interleaved({"one": lambda: call(1), "many": lambda: call(steps)}, repeats)
+    one, many = float(np.median(t["one"])) * 1e3, float(np.median(t["many"])) * 1e3 / steps
+    return dict(one_step_call_ms=one, per_step_in_long_call_ms=many,
+                fixed_cost_per_call_ms=one - many, steps_of_long_call=steps)
 
 
 def gain_settling(prob: dict, steps: int = 3000) -> dict:
@@ -340,6 +365,7 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
     progress("railpaper bench: profile, gain settling and peak memory")
     prof = profile_step(prob, 1000, 2 if smoke else 5 if quick else 20)
     budget = step_budget(prob, prof, 1000)
+    call_cost = bank_call_cost(prob, 1000, 3 if smoke else 7 if quick else 15)
     settling = gain_settling(prob)
     mem = peak_memory_mb(10000, 3)
     loads.sample("end")
@@ -370,7 +396,7 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
         resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
-        profile_N1000_ms=prof, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke,
+        profile_N1000_ms=prof, bank_call_N1000_ms=call_cost, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke,
         sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
         setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],

@@ -232,6 +232,20 @@ def busy_note(machine: dict) -> str:
     return text + ": the machine was quiet."
 
 
+def _call_cost_lines(g: dict) -> list[str]:
+    """The bank's fixed cost per call, when the run measured it."""
+    c = g.get("bank_call_N1000_ms")
+    if c is None:
+        return []
+    return [f"- **A call of the Kalman bank** at N = 1000 costs {c['fixed_cost_per_call_ms']:.2f} "
+            f"ms before any arithmetic ({c['fixed_cost_per_call_ms'] / c['one_step_call_ms']:.0%}"
+            f" of a one-step call, {c['one_step_call_ms']:.2f} ms; one step inside a "
+            f"{c['steps_of_long_call']}-step call takes {c['per_step_in_long_call_ms']:.2f} ms): "
+            "every filter's x, P, F and H are copied from the library's particle-first arrays "
+            "into the kernel's blocks and back. The paper scheme and the Q-GRBPF pay it at "
+            "every step; the working scheme once per chunk of steps."]
+
+
 def findings_markdown(payload: dict) -> str:
     """The page's 'what stands between this and real time', every number from this run."""
     g = payload
@@ -261,6 +275,7 @@ def findings_markdown(payload: dict) -> str:
         f"- **One paper-scheme step** at N = 1000 takes {step_ms:.1f} ms: "
         + ", ".join(f"{label} {prof[k]:.2f} ms ({prof[k] / step_ms:.0%})"
                     for k, label in PROFILE_LABELS.items()) + ".",
+        *_call_cost_lines(g),
         (f"- **Against filterpy** (one filter object per particle): "
          f"{g['speedup_vs_filterpy_lateral_N1000']:.1f}× (working scheme) and "
          f"{g['speedup_vs_filterpy_lateral_N1000_paper_scheme']:.1f}× (paper scheme) faster; "

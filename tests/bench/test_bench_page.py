@@ -35,7 +35,7 @@ OLD_KEYS = {"steps_per_s_rbpf_lateral_N1000", "steps_per_s_rbpf_lateral_N1000_pa
             "speedup_vs_numpy_lateral_N1000", "speedup_vs_numpy_lateral_N1000_paper_scheme",
             "profile_N1000_ms", "memory_N10000", "quick", "sizes", "machine", "rows"}
 NEW_KEYS = {"steps_per_s_rbpf_lateral_N1000_first1000", "resamplings_first1000", "spread",
-            "repeats", "setup", "gain_settling"}
+            "repeats", "setup", "gain_settling", "bank_call_N1000_ms"}
 
 
 def payload(load=(0.5, 0.4, 0.3), load_max=None):
@@ -69,6 +69,8 @@ def payload(load=(0.5, 0.4, 0.3), load_max=None):
                    first_steps=1000, particles=[100, 1000, 10000], baseline_N=1000),
         profile_N1000_ms={"kalman_bank_ms": 1.5, "zoh_all_particles_ms": 6.0,
                           "rest_of_paper_scheme_step_ms": 1.5},
+        bank_call_N1000_ms={"one_step_call_ms": 1.7, "per_step_in_long_call_ms": 0.9,
+                            "fixed_cost_per_call_ms": 0.8, "steps_of_long_call": 32},
         memory_N10000={"peak_rss_mb": 482.0, "particles_mb": 242.0, "bank_arrays_mb": 60.0},
         machine=machine, quick=True,
         sizes={"working": 1000, "paper": 200, "fp_working": 150, "fp_paper": 25}, rows=rows)
@@ -76,6 +78,11 @@ def payload(load=(0.5, 0.4, 0.3), load_max=None):
 
 def test_findings_quote_the_payload():
     text = findings_markdown(payload())
+    assert "costs 0.80 ms before any arithmetic (47% of a one-step call, 1.70 ms" in text
+    assert "inside a 32-step call takes 0.90 ms" in text
+    old = payload()
+    del old["bank_call_N1000_ms"]                      # a payload from before the measurement
+    assert "A call of the Kalman bank" not in findings_markdown(old)
     assert "237 steps/s (0.24 × real time" in text and "690 steps/s" in text
     assert "Steps 1–1000 at N = 1000" in text and "241 steps/s" in text
     assert "183 resamplings" in text
@@ -182,6 +189,8 @@ def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     monkeypatch.setattr(engine, "peak_memory_mb", lambda *a: payload()["memory_N10000"])
     monkeypatch.setattr(engine, "time_ibis", lambda prob, N, n: (2e-2, 12, 9 * n * N))
     monkeypatch.setattr(engine, "step_budget", lambda prob, prof, N: dict(N=N))
+    monkeypatch.setattr(engine, "bank_call_cost",
+                        lambda prob, N, repeats: payload()["bank_call_N1000_ms"])
     out = engine.main_payload(True, progress=lambda m: None)
     assert OLD_KEYS | NEW_KEYS <= set(out) and out["repeats"] == engine.QUICK_REPEATS >= 3
     assert out["resamplings_first1000"] == 183
