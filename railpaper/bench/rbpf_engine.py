@@ -46,8 +46,7 @@ REPEATS = 5                    # alternations of every interleaved comparison (f
 QUICK_REPEATS = 3              # at quick sizes: the book's Performance page, within its budget
 FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
 MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
-PROFILE_WARMUP = 40            # untimed paper-scheme steps before the step profile: after the
-                               # baselines, the first ~5 steps of a new filter ran 3x slower
+PROFILE_WARMUP = 40            # paper-scheme steps of a throwaway filter before the profiles
 
 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
@@ -149,13 +148,23 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
             int(run.n_filter_steps))
 
 
+def settle_the_machine(prob: dict, N: int) -> None:
+    """PROFILE_WARMUP untimed paper-scheme steps of a throwaway filter: run right after the
+    baselines, the first steps of a new filter were 3x slow in one part or another (bank or
+    ZOH), and a profile of them was wrong by that much."""
+    filt = make_filter(prob, "rbpf-paper", N)
+    for k in range(PROFILE_WARMUP):
+        filt.step(prob["y"][k], prob["u"][k])
+
+
 def profile_step(prob: dict, N: int, repeats: int) -> dict:
     """Milliseconds of a paper-scheme step at N, from ``repeats`` real steps in a warm loop: the
     Kalman bank, the new matrices of the moved particles (A(θ), ZOH, H(θ): the ``system`` call),
     and the rest (weights, resampling, Liu–West move, moments) = whole step − the two; medians
     over the steps, so one slow step (a page fault, another process) does not move them."""
+    settle_the_machine(prob, N)
     filt = make_filter(prob, "rbpf-paper", N)
-    for k in range(PROFILE_WARMUP):
+    for k in range(5):
         filt.step(prob["y"][k], prob["u"][k])
     spent = {"kalman_bank_ms": 0.0, "zoh_all_particles_ms": 0.0}
 
@@ -175,7 +184,7 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
         for k in range(repeats):
             spent.update(dict.fromkeys(spent, 0.0))
             t0 = time.perf_counter()
-            filt.step(prob["y"][PROFILE_WARMUP + k], prob["u"][PROFILE_WARMUP + k])
+            filt.step(prob["y"][5 + k], prob["u"][5 + k])
             total = time.perf_counter() - t0
             per_step.append((spent["kalman_bank_ms"], spent["zoh_all_particles_ms"],
                              total - spent["kalman_bank_ms"] - spent["zoh_all_particles_ms"]))
