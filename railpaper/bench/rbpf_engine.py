@@ -46,7 +46,7 @@ REPEATS = 5                    # alternations of every interleaved comparison (f
 QUICK_REPEATS = 3              # at quick sizes: the book's Performance page, within its budget
 FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
 MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
-PROFILE_WARMUP = 40            # paper-scheme steps of a throwaway filter before the profiles
+PROFILE_WARMUP = 40            # steps of a throwaway paper-scheme filter before the profiles
 
 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
@@ -148,7 +148,7 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
             int(run.n_filter_steps))
 
 
-def settle_the_machine(prob: dict, N: int) -> None:
+def warm_up_paper_scheme(prob: dict, N: int) -> None:
     """PROFILE_WARMUP untimed paper-scheme steps of a throwaway filter: run right after the
     baselines, the first steps of a new filter were 3x slow in one part or another (bank or
     ZOH), and a profile of them was wrong by that much."""
@@ -162,7 +162,7 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
     Kalman bank, the new matrices of the moved particles (A(θ), ZOH, H(θ): the ``system`` call),
     and the rest (weights, resampling, Liu–West move, moments) = whole step − the two; medians
     over the steps, so one slow step (a page fault, another process) does not move them."""
-    settle_the_machine(prob, N)
+    warm_up_paper_scheme(prob, N)
     filt = make_filter(prob, "rbpf-paper", N)
     for k in range(5):
         filt.step(prob["y"][k], prob["u"][k])
@@ -196,27 +196,28 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
 
 
 def bank_call_cost(prob: dict, N: int, repeats: int, steps: int = 32) -> dict:
-    """Milliseconds of the Kalman bank at N on the paper scheme's particles after
-    PROFILE_WARMUP steps: a one-step call, a step inside a ``steps``-step call, and their
-    difference, the fixed cost of a call (copying every filter's x, P, F and H between the
-    library's particle-first arrays and the kernel's blocks, and back); medians over
-    ``repeats`` interleaved pairs."""
+    """Milliseconds of the Kalman bank at N on the particles of steps 6.. of a fresh paper-scheme
+    filter (as :func:`profile_step`): a one-step call, a step inside a ``steps``-step call, and
+    the fixed cost of a call, the median over ``repeats`` interleaved pairs of one-step call −
+    step of the long call (the gather of every filter's x, P, F and H into the kernel's blocks,
+    the scatter of x, P back, the output arrays and the start of the parallel loop)."""
+    warm_up_paper_scheme(prob, N)
     filt = make_filter(prob, "rbpf-paper", N)
-    for k in range(PROFILE_WARMUP):
+    for k in range(5):
         filt.step(prob["y"][k], prob["u"][k])
     x, P = (filt.x, filt.P) if filt.ancestors is None else \
         (filt.x[filt.ancestors], filt.P[filt.ancestors])
-    Y, U = prob["y"][PROFILE_WARMUP:PROFILE_WARMUP + steps], \
-        prob["u"][PROFILE_WARMUP:PROFILE_WARMUP + steps]
+    Y, U = prob["y"][5:5 + steps], prob["u"][5:5 + steps]
 
     def call(k):
         t0 = time.perf_counter()
         kalman_run(x, P, filt.sys, Y[:k], U[:k])
-        return time.perf_counter() - t0
+        return (time.perf_counter() - t0) * 1e3 / k
     t = interleaved({"one": lambda: call(1), "many": lambda: call(steps)}, repeats)
-    one, many = float(np.median(t["one"])) * 1e3, float(np.median(t["many"])) * 1e3 / steps
-    return dict(one_step_call_ms=one, per_step_in_long_call_ms=many,
-                fixed_cost_per_call_ms=one - many, steps_of_long_call=steps)
+    fixed = np.array(t["one"]) - np.array(t["many"])
+    return dict(one_step_call_ms=float(np.median(t["one"])),
+                per_step_in_long_call_ms=float(np.median(t["many"])),
+                fixed_cost_per_call_ms=float(np.median(fixed)), steps_of_long_call=steps)
 
 
 def gain_settling(prob: dict, steps: int = 3000) -> dict:
@@ -405,7 +406,8 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
         resamplings_first1000=resamplings[0] if len(resamplings) == 1 else resamplings,
-        profile_N1000_ms=prof, bank_call_N1000_ms=call_cost, flops_N1000=budget, memory_N10000=mem, quick=quick, smoke=smoke,
+        profile_N1000_ms=prof, bank_call_N1000_ms=call_cost, flops_N1000=budget,
+        memory_N10000=mem, quick=quick, smoke=smoke,
         sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
         setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],

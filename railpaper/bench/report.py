@@ -238,12 +238,13 @@ def _call_cost_lines(g: dict) -> list[str]:
     if c is None:
         return []
     return [f"- **A call of the Kalman bank** at N = 1000 costs {c['fixed_cost_per_call_ms']:.2f} "
-            f"ms before any arithmetic ({c['fixed_cost_per_call_ms'] / c['one_step_call_ms']:.0%}"
-            f" of a one-step call, {c['one_step_call_ms']:.2f} ms; one step inside a "
+            f"ms besides its steps ({c['fixed_cost_per_call_ms'] / c['one_step_call_ms']:.0%} "
+            f"of a one-step call, {c['one_step_call_ms']:.2f} ms; one step inside a "
             f"{c['steps_of_long_call']}-step call takes {c['per_step_in_long_call_ms']:.2f} ms): "
-            "every filter's x, P, F and H are copied from the library's particle-first arrays "
-            "into the kernel's blocks and back. The paper scheme and the Q-GRBPF pay it at "
-            "every step; the working scheme once per chunk of steps."]
+            "mostly gathering every filter's x, P, F and H from the library's particle-first "
+            "arrays into the kernel's blocks and scattering x, P back. The paper scheme pays it "
+            "at every step, the Q-GRBPF twice (its prediction and its update are two calls), "
+            "the working scheme once per call of several steps."]
 
 
 def findings_markdown(payload: dict) -> str:

@@ -37,6 +37,7 @@ import numba
 import numpy as np
 
 from railpaper.engine.kalman import LOG_2PI
+from railpaper.engine.kernel_arrays import kernel_array
 from railpaper.engine.linear_gaussian import AffineSystem
 
 
@@ -504,15 +505,15 @@ def _matrices(system: AffineSystem, n_steps: int, u):
         B0, Bt, U = np.zeros((n, 1)), np.zeros((d, n, 1)), np.zeros((n_steps, 1))
     else:
         B0, Bt = system.B0, system.B_theta
-        U = np.ascontiguousarray(np.asarray(u, float).reshape(n_steps, -1))
-    return (np.ascontiguousarray(system.F0), np.ascontiguousarray(system.F_theta), B0, Bt, U,
-            system.Q, system.H, system.R)
+        U = np.asarray(u, float).reshape(n_steps, -1)
+    return tuple(kernel_array(M) for M in (system.F0, system.F_theta, B0, Bt, U, system.Q,
+                                           system.H, system.R))
 
 
 def _particles_last(x, P) -> tuple[np.ndarray, np.ndarray]:
     """(N, n), (N, n, n) → C-contiguous (n, N), (n, n, N): the kernels' layout."""
-    return (np.ascontiguousarray(np.asarray(x, float).T),
-            np.ascontiguousarray(np.asarray(P, float).transpose(1, 2, 0)))
+    return (kernel_array(np.asarray(x, float).T),
+            kernel_array(np.asarray(P, float).transpose(1, 2, 0)))
 
 
 def _particles_first(x, P) -> tuple[np.ndarray, np.ndarray]:
@@ -532,7 +533,7 @@ def qgrbpf_pass(system: AffineSystem, theta, x, P, Y, u, rng: np.random.Generato
     filters ``x`` (N, n), ``P`` (N, n, n).  Returns (per-step outputs, final (θ, x, P, q)):
     the outputs are mean, std (K, d), x mean, x std (K, n), ess, degenerate, log evidence
     (K,)."""
-    Y = np.ascontiguousarray(np.atleast_2d(np.asarray(Y, float)))
+    Y = kernel_array(np.atleast_2d(np.asarray(Y, float)))
     K, (N, d) = len(Y), theta.shape
     n, p = x.shape[1], system.H.shape[0]
     out = _outputs(K, d, n)
@@ -550,7 +551,7 @@ def rbpf_pass(system: AffineSystem, theta, x, P, log_w, steps_done: int, Y, u,
     ``offset``, ``scale`` and ``log_mask`` (d,) as :func:`railpaper.engine.particles.liu_west_move`.
     Returns (per-step outputs as :func:`qgrbpf_pass` plus ``resampled`` (K,), final
     (θ, x, P, log w))."""
-    Y = np.ascontiguousarray(np.atleast_2d(np.asarray(Y, float)))
+    Y = kernel_array(np.atleast_2d(np.asarray(Y, float)))
     K, (N, d) = len(Y), theta.shape
     n, p = x.shape[1], system.H.shape[0]
     out = _outputs(K, d, n) + (np.empty(K, dtype=np.bool_),)

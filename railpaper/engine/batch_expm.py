@@ -29,6 +29,8 @@ import numba
 import numpy as np
 from scipy.linalg import matrix_balance
 
+from railpaper.engine.kernel_arrays import kernel_array
+
 BLOCK = 64
 TAYLOR = tuple(1.0 / math.factorial(j) for j in range(13))
 
@@ -125,7 +127,7 @@ def expm_stack(M: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """
     M = np.asarray(M, float)
     single = M.ndim == 2
-    stack = np.ascontiguousarray(M[None] if single else M)
+    stack = kernel_array(M[None] if single else M)
     if not np.all(np.isfinite(stack)):
         raise ValueError("expm_stack: matrix has NaN or inf entries")
     d = balancing(stack[0]) if scale is None else np.asarray(scale, float)

@@ -1,9 +1,10 @@
-"""The form in which arrays reach the compiled kernels: C-contiguous, float64, writable.
+"""The form in which arrays reach the compiled kernels: C-contiguous, writable, of one dtype.
 
 numba compiles a kernel once per argument type, and a read-only array (a frozen result's field,
 ``np.broadcast_to``'s view, which ``np.ascontiguousarray`` passes through) is a type of its own:
-one read-only argument compiles the whole kernel again, seconds of a first run.  Every wrapper
-hands its kernels :func:`kernel_array`\\ s, so each kernel has one signature::
+one read-only argument compiles the whole kernel again, seconds of a first run.  The wrappers
+of the Kalman bank, the smoother, the one-pass filters and the ZOHs hand their kernels
+:func:`kernel_array`\\ s, so each of those kernels has one signature::
 
     >>> import numpy as np
     >>> view = np.broadcast_to(np.eye(2), (3, 2, 2))     # read-only

@@ -40,6 +40,8 @@ import numba
 import numpy as np
 from scipy.linalg import matrix_balance
 
+from railpaper.engine.kernel_arrays import kernel_array
+
 BLOCK = 32          # matrices per block: the SIMD lanes of every inner loop
 TOL = 2.0 ** -53    # relative truncation bound (unit roundoff): the series is cut below rounding
 KMAX = 20           # most terms without squaring (≈ 6 terms cost one squaring)
@@ -259,9 +261,9 @@ def zoh_sparse(A: np.ndarray, B: np.ndarray, dt_s: float, scale: np.ndarray | No
     G : ndarray, shape (N, n, m)
         ``∫₀^dt e^{As} ds B``, units of B times s.
     """
-    A = np.ascontiguousarray(A, dtype=float)
+    A = kernel_array(A)
     B = np.asarray(B, dtype=float)
-    B3 = np.ascontiguousarray(B[None] if B.ndim == 2 else B)
+    B3 = kernel_array(B[None] if B.ndim == 2 else B)
     N, n, m = A.shape[0], A.shape[-1], B3.shape[-1]
     if B3.shape[0] not in (1, N) or B3.shape[1] != n:
         raise ValueError(f"zoh_sparse: B of shape {B.shape} does not fit A of shape {A.shape}")
@@ -285,7 +287,7 @@ def affine_balance(theta: np.ndarray, A0: np.ndarray, Ak: np.ndarray, B: np.ndar
 
 def _checked_theta(theta: np.ndarray, n_theta: int) -> np.ndarray:
     """θ as a contiguous (N, n_theta) float array; a wrong shape or a NaN/inf is refused."""
-    theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
+    theta = kernel_array(np.atleast_2d(theta))
     if theta.ndim != 2 or theta.shape[1] != n_theta:
         raise ValueError(f"zoh_affine: shapes theta {theta.shape} and {n_theta} affine terms "
                          "do not fit")

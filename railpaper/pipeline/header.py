@@ -89,7 +89,8 @@ def rerun_markdown(chapter: str) -> str:
     spec = chapter_spec(chapter)
     example = next((p for p in spec.parameters if p.name != "seed" and p.type in ("float", "int")),
                    spec.parameters[0])
-    lines = ["````{dropdown} Re-run this chapter: parameters and commands", "",
+    lines = ["````{dropdown} Re-run this chapter: parameters and commands",
+             ":class-container: rerun-box", "",
              f"From a checkout with `make venv` done (see {{doc}}`the reproducibility page "
              "</reproducibility>`):", "", "```text",
              f".venv/bin/railpaper run {chapter} --out runs/my-run",

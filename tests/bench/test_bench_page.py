@@ -78,7 +78,7 @@ def payload(load=(0.5, 0.4, 0.3), load_max=None):
 
 def test_findings_quote_the_payload():
     text = findings_markdown(payload())
-    assert "costs 0.80 ms before any arithmetic (47% of a one-step call, 1.70 ms" in text
+    assert "costs 0.80 ms besides its steps (47% of a one-step call, 1.70 ms" in text
     assert "inside a 32-step call takes 0.90 ms" in text
     old = payload()
     del old["bank_call_N1000_ms"]                      # a payload from before the measurement

@@ -34,9 +34,10 @@ def possible_horizons(study: ReadingsStudy, reading: str, par: str, step: int) -
 
 
 def readings_table(study: ReadingsStudy) -> str:
-    """Markdown: per reading (its label gives Q, R and P0), the settling step of ``a`` at each
-    horizon (median [95 %]) and the posterior's absolute error and std of ``a`` at step 55 (no
-    ``|`` inside a cell: it would end the cell)."""
+    """Markdown: per reading (the labels of data/quasi-gaussian-rbpf/readings.toml state its Q,
+    R and P0), the settling step of ``a`` at each horizon (median [95 %]) and the posterior's
+    absolute error and std of ``a`` at step 55 (no ``|`` inside a cell: it would end the
+    cell)."""
     head = ["reading"] + [
         f"settling step of a, {h}-step figure" for h in study.horizons_steps] + [
         "abs. error of a at step 55 (median)", "posterior std of a at step 55 (median)"]
