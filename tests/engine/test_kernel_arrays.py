@@ -35,10 +35,18 @@ def test_bank_compiles_once_for_read_only_inputs():
                                  R=np.eye(p), B=rng.standard_normal((n, 1)))
     x, P = rng.standard_normal((N, n)), np.broadcast_to(np.eye(n), (N, n, n)).copy()
     Y, U = rng.standard_normal((K, p)), rng.standard_normal((K, 1))
-    writable = kalman_bank.kalman_run(x, P, system, Y, U, record=True)
-    compiled = len(kalman_bank._kf_run.signatures)
-    frozen = kalman_bank.kalman_run(*read_only(x, P), system, *read_only(Y, U), record=True)
-    assert len(kalman_bank._kf_run.signatures) == compiled
+    F_ro, H_ro = read_only(system.F, system.H)
+    frozen_system = LinearGaussianBatch(F=F_ro, Q=system.Q, H=H_ro, R=system.R, B=system.B)
+    kernels = (kalman_bank._kf_run, kalman_bank._kf_predict, kalman_bank._kf_update)
+
+    def every_entry(x, P, s, Y, U):
+        prior = kalman_bank.kalman_predict(x, P, s, Y[0], U[0])
+        return (*kalman_bank.kalman_run(x, P, s, Y, U, record=True), *prior,
+                *kalman_bank.kalman_update(*prior[:2], Y[0], s.H, s.R))
+    writable = every_entry(x, P, system, Y, U)
+    compiled = [len(k.signatures) for k in kernels]
+    frozen = every_entry(*read_only(x, P), frozen_system, *read_only(Y, U))
+    assert [len(k.signatures) for k in kernels] == compiled
     for a, b in zip(writable, frozen):
         assert np.array_equal(a, b)
 
@@ -52,11 +60,13 @@ def test_smoother_compiles_once_for_read_only_inputs():
     y = rng.standard_normal((T, G, S, p))
     x_post, innovations = kalman_smoother.filter_means(g, F, H, y, np.zeros(n))
     smoothed = kalman_smoother.smoother_means(g, F, H, innovations, x_post)
-    counts = [len(k.signatures) for k in (kalman_smoother._filter_kernel,
-                                          kalman_smoother._smoother_kernel)]
+    kernels = (kalman_smoother._riccati_kernel, kalman_smoother._filter_kernel,
+               kalman_smoother._smoother_kernel)
+    counts = [len(k.signatures) for k in kernels]
     F_ro, y_ro = read_only(F, y)
-    x_post2, innovations2 = kalman_smoother.filter_means(g, F_ro, H, y_ro, np.zeros(n))
-    smoothed2 = kalman_smoother.smoother_means(g, F_ro, H, *read_only(innovations2, x_post2))
-    assert counts == [len(k.signatures) for k in (kalman_smoother._filter_kernel,
-                                                  kalman_smoother._smoother_kernel)]
-    assert np.array_equal(x_post, x_post2) and np.array_equal(smoothed, smoothed2)
+    g2 = kalman_smoother.gains(F_ro, *read_only(Q, H, R, np.eye(n)), T)
+    x_post2, innovations2 = kalman_smoother.filter_means(g2, F_ro, H, y_ro, np.zeros(n))
+    smoothed2 = kalman_smoother.smoother_means(g2, F_ro, H, *read_only(innovations2, x_post2))
+    assert counts == [len(k.signatures) for k in kernels]
+    assert np.array_equal(g.K, g2.K) and np.array_equal(x_post, x_post2)
+    assert np.array_equal(smoothed, smoothed2)
