@@ -47,6 +47,7 @@ QUICK_REPEATS = 3              # at quick sizes: the book's Performance page, wi
 FIRST_STEPS = 1000             # steps 1..FIRST_STEPS: the working scheme's start-up
 MAX_CHUNK = 32                 # RaoBlackwellisedPF.steps' default chunk of the working scheme
 PROFILE_WARMUP = 40            # steps of a throwaway paper-scheme filter before the profiles
+PROFILE_SKIP = 5               # the profiled filter's untimed first steps
 
 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
@@ -148,13 +149,21 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
             int(run.n_filter_steps))
 
 
-def warm_up_paper_scheme(prob: dict, N: int) -> None:
-    """PROFILE_WARMUP untimed paper-scheme steps of a throwaway filter: run right after the
-    baselines, the first steps of a new filter were 3x slow in one part or another (bank or
-    ZOH), and a profile of them was wrong by that much."""
+def paper_filter_after(prob: dict, N: int, steps: int):
+    """A paper-scheme filter at N that has run the record's first ``steps`` steps."""
     filt = make_filter(prob, "rbpf-paper", N)
-    for k in range(PROFILE_WARMUP):
+    for k in range(steps):
         filt.step(prob["y"][k], prob["u"][k])
+    return filt
+
+
+def profiled_paper_filter(prob: dict, N: int):
+    """The filter the profiles time from step PROFILE_SKIP + 1 on, made after PROFILE_WARMUP
+    steps of a throwaway one: run right after the baselines, the first steps of a new filter
+    were 3x slow in one part or another (bank or ZOH), and a profile of them was wrong by that
+    much."""
+    paper_filter_after(prob, N, PROFILE_WARMUP)
+    return paper_filter_after(prob, N, PROFILE_SKIP)
 
 
 def profile_step(prob: dict, N: int, repeats: int) -> dict:
@@ -162,10 +171,7 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
     Kalman bank, the new matrices of the moved particles (A(θ), ZOH, H(θ): the ``system`` call),
     and the rest (weights, resampling, Liu–West move, moments) = whole step − the two; medians
     over the steps, so one slow step (a page fault, another process) does not move them."""
-    warm_up_paper_scheme(prob, N)
-    filt = make_filter(prob, "rbpf-paper", N)
-    for k in range(5):
-        filt.step(prob["y"][k], prob["u"][k])
+    filt = profiled_paper_filter(prob, N)
     spent = {"kalman_bank_ms": 0.0, "zoh_all_particles_ms": 0.0}
 
     def timed(function, key):
@@ -184,7 +190,7 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
         for k in range(repeats):
             spent.update(dict.fromkeys(spent, 0.0))
             t0 = time.perf_counter()
-            filt.step(prob["y"][5 + k], prob["u"][5 + k])
+            filt.step(prob["y"][PROFILE_SKIP + k], prob["u"][PROFILE_SKIP + k])
             total = time.perf_counter() - t0
             per_step.append((spent["kalman_bank_ms"], spent["zoh_all_particles_ms"],
                              total - spent["kalman_bank_ms"] - spent["zoh_all_particles_ms"]))
@@ -196,18 +202,15 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
 
 
 def bank_call_cost(prob: dict, N: int, repeats: int, steps: int = 32) -> dict:
-    """Milliseconds of the Kalman bank at N on the particles of steps 6.. of a fresh paper-scheme
-    filter (as :func:`profile_step`): a one-step call, a step inside a ``steps``-step call, and
+    """Milliseconds of the Kalman bank at N on the particles of :func:`profiled_paper_filter`
+    (as :func:`profile_step`): a one-step call, a step inside a ``steps``-step call, and
     the fixed cost of a call, the median over ``repeats`` interleaved pairs of one-step call −
     step of the long call (the gather of every filter's x, P, F and H into the kernel's blocks,
     the scatter of x, P back, the output arrays and the start of the parallel loop)."""
-    warm_up_paper_scheme(prob, N)
-    filt = make_filter(prob, "rbpf-paper", N)
-    for k in range(5):
-        filt.step(prob["y"][k], prob["u"][k])
+    filt = profiled_paper_filter(prob, N)
     x, P = (filt.x, filt.P) if filt.ancestors is None else \
         (filt.x[filt.ancestors], filt.P[filt.ancestors])
-    Y, U = prob["y"][5:5 + steps], prob["u"][5:5 + steps]
+    Y, U = (prob[key][PROFILE_SKIP:PROFILE_SKIP + steps] for key in ("y", "u"))
 
     def call(k):
         t0 = time.perf_counter()
