@@ -16,6 +16,8 @@ gives the fused step's bits.  It is written for speed, not generality:
   runs over the filters in the innermost loop (structure of arrays), so each scalar formula of a
   16×16 product becomes one SIMD loop over the block — no Python loop over particles;
 * symmetry: only the upper triangle of ``F P Fᵀ`` and of the posterior is computed;
+* sparsity: ``H P⁻``, ``S`` and the innovation run over H's structural nonzeros only
+  (:func:`measurement_pattern`, the union over the bank; same bits as the dense products);
 * the update uses the whitened gain ``W = L⁻¹ H P⁻`` (``S = L Lᵀ``)::
 
       x = x⁻ + Wᵀ z,   z = L⁻¹ v       (= x⁻ + K v,  K = P⁻ Hᵀ S⁻¹)
@@ -82,19 +84,43 @@ def _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP):  # pragma: no cover
 
 
 @numba.njit(fastmath={"contract"}, cache=True)
-def _innovation_block(Hl, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W, logdet, bad,
-                      loglik):  # pragma: no cover - compiled
+def _innovation_block(Hl, hcols, hcount, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W,
+                      logdet, bad, loglik):  # pragma: no cover - compiled
     """Predictive log-likelihood of a block, ``loglik`` = log N(y; H x⁻, H P⁻ Hᵀ + R), with the
     whitened innovation ``z`` and, when ``gain``, the whitened gain ``W`` = L⁻¹ H P⁻ (zeroed,
-    with z, where S is not positive definite: no update there; log-likelihood −inf)."""
+    with z, where S is not positive definite: no update there; log-likelihood −inf).
+
+    H's products run over its structural nonzeros only: row r's columns ``hcols[r, :hcount[r]]``
+    (ascending; :func:`measurement_pattern`).  A skipped term is an exact zero, and the kept
+    ones are summed in the dense loops' order, so the bits are the dense products' (for finite
+    P⁻)."""
     p, n, nb = Hl.shape
-    stack_matmul(Hl, Pl, HP)              # H P⁻ (p, n)
-    _symmetric_abt(HP, Hl, R, lo, sR, S)  # S = H P⁻ Hᵀ + R
+    # H P⁻ (p, n)
+    HP[:] = 0.0
+    for r in range(p):
+        for t in range(hcount[r]):
+            k = hcols[r, t]
+            for j in range(n):
+                for q in range(nb):
+                    HP[r, j, q] += Hl[r, k, q] * Pl[k, j, q]
+    # S = H P⁻ Hᵀ + R (upper triangle, mirrored)
+    for i in range(p):
+        for j in range(i, p):
+            for q in range(nb):
+                S[i, j, q] = R[(lo + q) * sR, i, j]
+            for t in range(hcount[j]):
+                k = hcols[j, t]
+                for q in range(nb):
+                    S[i, j, q] += HP[i, k, q] * Hl[j, k, q]
+        for j in range(i + 1, p):
+            for q in range(nb):
+                S[j, i, q] = S[i, j, q]
     # v = y − H x⁻
     for r in range(p):
         for q in range(nb):
             v[r, q] = y[r]
-        for k in range(n):
+        for t in range(hcount[r]):
+            k = hcols[r, t]
             for q in range(nb):
                 v[r, q] -= Hl[r, k, q] * xp[k, q]
     # S = L Lᵀ (Cholesky per filter); not positive definite -> no update, −inf
@@ -228,8 +254,8 @@ def _innovation_workspace(n, p, nb, gain):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
-            record, block):  # pragma: no cover - compiled
+def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, loglik, x_hist,
+            var_hist, record, block):  # pragma: no cover - compiled
     """Predict + update (:func:`_predict_block`, :func:`_innovation_block`,
     :func:`_posterior_block`) of every filter over the rows of Y."""
     N, n = x_out.shape
@@ -253,8 +279,8 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
         HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
         for t in range(n_steps):                  # the block stays in cache over the steps
             _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
-            _innovation_block(Hl, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc, z, W,
-                              logdet, bad, ll)                                # z, W, log N
+            _innovation_block(Hl, hcols, hcount, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc,
+                              z, W, logdet, bad, ll)                                # z, W, log N
             _posterior_block(xp, W, z, xl, Pl)                                # x, P
             for q in range(nb):
                 loglik[lo + q, t] = ll[q]
@@ -267,8 +293,8 @@ def _kf_run(x, P, F, Q, B, U, H, R, Y, ancestors, x_out, P_out, loglik, x_hist, 
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, rows, x_prior, P_prior, loglik,
-                block):  # pragma: no cover - compiled
+def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_prior, P_prior,
+                loglik, block):  # pragma: no cover - compiled
     """Time update and predictive log-likelihood of every filter, no measurement update: the
     same arithmetic as the first half of :func:`_kf_run`'s step, without the gain.  Filter i
     starts from x, P at ``ancestors[i]`` and uses the matrices at ``rows[i]``."""
@@ -291,15 +317,15 @@ def _kf_predict(x, P, F, Q, B, u, H, R, y, ancestors, rows, x_prior, P_prior, lo
         xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
         HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, False)
         _predict_block(Fl, xl, Pl, Bl, sB, u, Ql, sQ, 0, xp, FP)             # x⁻, P⁻
-        _innovation_block(Hl, Pl, xp, y, Rl, sR, 0, False, HP, S, v, Lc, z, W, logdet, bad,
-                          ll)                                               # log N(y; Hx⁻, S)
+        _innovation_block(Hl, hcols, hcount, Pl, xp, y, Rl, sR, 0, False, HP, S, v, Lc, z, W,
+                          logdet, bad, ll)                                # log N(y; Hx⁻, S)
         for q in range(nb):
             loglik[lo + q] = ll[q]
         _scatter_block(xp, Pl, lo, x_prior, P_prior)
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_update(x_prior, P_prior, H, R, y, x_out, P_out, loglik,
+def _kf_update(x_prior, P_prior, H, hcols, hcount, R, y, x_out, P_out, loglik,
                block):  # pragma: no cover - compiled
     """Measurement update of every filter from its stored prediction: the same arithmetic as
     the second half of :func:`_kf_run`'s step."""
@@ -316,8 +342,8 @@ def _kf_update(x_prior, P_prior, H, R, y, x_out, P_out, loglik,
         _gather_matrix(H, own, sH, Hl)
         xl = np.empty((n, nb))
         HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
-        _innovation_block(Hl, Pl, xp, y, R, sR, lo, True, HP, S, v, Lc, z, W, logdet, bad,
-                          ll)                                               # z, W, log N
+        _innovation_block(Hl, hcols, hcount, Pl, xp, y, R, sR, lo, True, HP, S, v, Lc, z, W,
+                          logdet, bad, ll)                                # z, W, log N
         _posterior_block(xp, W, z, xl, Pl)                                  # x, P
         for q in range(nb):
             loglik[lo + q] = ll[q]
@@ -333,17 +359,50 @@ def block_size(N: int) -> int:
     return BLOCK if N > BLOCK else max(1, (N + 1) // 2)
 
 
-def multiply_adds(n: int, p: int, m: int) -> int:
-    """Multiply-adds of one filter's step in :func:`_kf_run` (as the kernel runs it, dense H).
+def multiply_adds(n: int, p: int, m: int, h_row_nonzeros=None) -> int:
+    """Multiply-adds of one filter's step in :func:`_kf_run`, as the kernel runs it.
 
-    x⁻ = F x + B u: n² + n m;  F P: n³;  F P Fᵀ (upper triangle): n²(n+1)/2;  H P⁻: p n²;
-    S (upper): n p(p+1)/2;  v: p n;  Cholesky: Σ_j j (p − j);  z and W = L⁻¹ H P⁻:
+    ``h_row_nonzeros`` (p,): the structural nonzeros of each row of H (``hcount`` of
+    :func:`measurement_pattern`; default n each, a dense H), c_r below.
+    x⁻ = F x + B u: n² + n m;  F P: n³;  F P Fᵀ (upper triangle): n²(n+1)/2;  H P⁻: n Σ c_r;
+    S (upper): Σ_j (j + 1) c_j;  v: Σ c_r;  Cholesky: Σ_j j (p − j);  z and W = L⁻¹ H P⁻:
     (n + 1) p(p−1)/2;  zᵀz: p;  x += Wᵀ z: n p;  P −= Wᵀ W (upper): p n(n+1)/2.  Lateral
-    model (n = 16, p = 5, m = 2): 9 115.  Divisions, square roots and logs are not counted.
+    model (n = 16, p = 5, m = 2): 9 115 with a dense H, 7 926 with its 21 nonzeros (rows
+    5, 5, 6, 4, 1).
+    Divisions, square roots and logs are not counted.
     """
+    c = [n] * p if h_row_nonzeros is None else [int(k) for k in h_row_nonzeros]
     chol = sum(j * (p - j) for j in range(p))
-    return (n * n + n * m + n ** 3 + n * n * (n + 1) // 2 + p * n * n + n * p * (p + 1) // 2
-            + p * n + chol + (n + 1) * p * (p - 1) // 2 + p + n * p + p * n * (n + 1) // 2)
+    return (n * n + n * m + n ** 3 + n * n * (n + 1) // 2 + n * sum(c)
+            + sum((j + 1) * c[j] for j in range(p)) + sum(c) + chol
+            + (n + 1) * p * (p - 1) // 2 + p + n * p + p * n * (n + 1) // 2)
+
+
+@numba.njit(cache=True)
+def _structural_nonzeros(H):  # pragma: no cover - compiled
+    """:func:`measurement_pattern` of a stack H (N, p, n): an elementwise OR over the stack
+    (one SIMD loop), then each row's columns."""
+    p, n = H.shape[1], H.shape[2]
+    used = np.zeros((p, n), np.bool_)
+    for q in range(H.shape[0]):
+        for r in range(p):
+            for k in range(n):
+                used[r, k] |= H[q, r, k] != 0.0
+    hcols, hcount = np.zeros((p, n), np.int64), np.zeros(p, np.int64)
+    for r in range(p):
+        for k in range(n):
+            if used[r, k]:
+                hcols[r, hcount[r]] = k
+                hcount[r] += 1
+    return hcols, hcount
+
+
+def measurement_pattern(H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The structural nonzeros of a stack of measurement matrices H (N, p, n), the kernels'
+    ``hcols``, ``hcount``: row r's columns where any H_i[r] is nonzero (or NaN), ascending, in
+    ``hcols[r, :hcount[r]]``.  The lateral model's H (accelerations: rows of A(θ)) has 21 of
+    its 80 entries nonzero, so H P⁻ costs 21 n instead of p n² multiply-adds."""
+    return _structural_nonzeros(kernel_array(np.asarray(H, float)))
 
 
 def _stack(M: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
@@ -408,8 +467,9 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty((N, K))
     hist_shape = (N, K, n) if record else (0, 0, 0)
     x_hist, var_hist = np.empty(hist_shape), np.empty(hist_shape)
+    H = _stack(system.H, (p, n))
     _kf_run(x, kernel_array(P), _stack(system.F, (n, n)),
-            _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, _stack(system.H, (p, n)),
+            _stack(system.Q, (n, n)), _stack(B, (n, 1)), U, H, *measurement_pattern(H),
             _stack(system.R, (p, p)), Y, ancestors, x_out, P_out, loglik, x_hist, var_hist,
             record, block_size(N))
     if record:
@@ -501,8 +561,9 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
         B, u = None, np.zeros(1)
     u = kernel_array(np.asarray(u, float).reshape(-1))
     x_prior, P_prior, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
+    H = _stack(system.H, (p, n))
     _kf_predict(x, kernel_array(P), _stack(system.F, (n, n)),
-                _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, _stack(system.H, (p, n)),
+                _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, H, *measurement_pattern(H),
                 _stack(system.R, (p, p)), y, ancestors, matrix_rows, x_prior, P_prior,
                 loglik, block_size(N))
     return x_prior, P_prior, loglik
@@ -538,6 +599,7 @@ def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np
     y = kernel_array(np.asarray(y, float).reshape(-1))
     p = y.shape[0]
     x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
-    _kf_update(x_prior, kernel_array(P_prior), _stack(H, (p, n)),
+    H = _stack(H, (p, n))
+    _kf_update(x_prior, kernel_array(P_prior), H, *measurement_pattern(H),
                _stack(R, (p, p)), y, x_out, P_out, loglik, block_size(N))
     return x_out, P_out, loglik

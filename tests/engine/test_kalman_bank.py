@@ -12,7 +12,9 @@ from scipy.linalg import expm
 from railpaper.discretise import zoh
 from railpaper.engine.batch_expm import expm_stack, zoh_stack
 from railpaper.engine.kalman import predict, update
-from railpaper.engine.kalman_bank import block_size, kalman_run, kalman_step
+from railpaper.engine import kalman_bank
+from railpaper.engine.kalman_bank import (block_size, kalman_run, kalman_step,
+                                          measurement_pattern)
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.rbpf import RaoBlackwellisedPF, run_rbpf
 from railpaper.models import lateral_16state as L
@@ -166,6 +168,54 @@ def test_kalman_run_over_steps_is_bit_identical_to_kalman_step_step_by_step():
     assert np.array_equal(x, x_end) and np.array_equal(P, P_end)
 
 
+def sparse_measurement_system(rng, N, n, p, m):
+    """Random filters whose H (N, p, n) has structural zeros: each row keeps its own random
+    half of the columns (as the lateral model's acceleration rows keep 21 of 80 entries), and
+    one filter's kept entry is an exact zero the others do not share."""
+    keep = rng.random((p, n)) < 0.5
+    keep[:, 0] = True
+    H = rng.standard_normal((N, p, n)) * keep
+    H[3, 0, 0] = 0.0
+    return LinearGaussianBatch(np.stack([random_stable(rng, n) for _ in range(N)]),
+                               random_spd(rng, n), H, random_spd(rng, p),
+                               rng.standard_normal((N, n, m))), keep
+
+
+def test_measurement_pattern_lists_each_rows_structural_nonzeros_in_order():
+    rng = np.random.default_rng(4)
+    s, keep = sparse_measurement_system(rng, 9, 7, 3, 1)
+    H = s.H.copy()
+    H[5, 2, 6] = np.nan                     # a NaN entry stays in the products
+    keep[2, 6] = True
+    hcols, hcount = measurement_pattern(H)
+    for r in range(3):
+        assert list(hcols[r, :hcount[r]]) == list(np.flatnonzero(keep[r]))
+
+
+def test_sparse_measurement_products_equal_the_dense_ones_bit_for_bit_and_the_textbook():
+    """The kernels run H P⁻, S and v over H's structural nonzeros only: the bits equal the same
+    kernel told every column is used (the dense products), and the filter equals the Joseph
+    form on random systems with sparse H."""
+    rng = np.random.default_rng(21)
+    N, n, p, m = 70, 16, 5, 2
+    s, _ = sparse_measurement_system(rng, N, n, p, m)
+    x, P = rng.standard_normal((N, n)), np.stack([random_spd(rng, n) for _ in range(N)])
+    Y, U = rng.standard_normal((6, p)), rng.standard_normal((6, m))
+    sparse = kalman_run(x, P, s, Y, U, record=True)
+    dense_cols = np.tile(np.arange(n), (p, 1))
+    outs = (np.empty((N, n)), np.empty((N, n, n)), np.empty((N, 6)), np.empty((N, 6, n)),
+            np.empty((N, 6, n)))
+    kalman_bank._kf_run(x, P, s.F, s.Q[None], s.B, U, s.H, dense_cols, np.full(p, n), s.R[None],
+                        Y, np.arange(N), *outs, True, block_size(N))
+    for a, b in zip(sparse, outs):
+        assert np.array_equal(a, b)
+    xr, Pr = x, P
+    for k in range(6):
+        xr, Pr, llr = reference_step(xr, Pr, s, Y[k], U[k])
+        np.testing.assert_allclose(sparse[2][:, k], llr, rtol=1e-10, atol=1e-10)
+    assert rel(sparse[0], xr) < 1e-10 and rel(sparse[1], Pr) < 1e-10
+
+
 def test_block_size_changes_no_bit():
     """A filter's result does not depend on the bank it runs in: a bank of 40 (two blocks of
     20) and of 1 (one block of 1) give the bits of the same filters inside a bank of 200
@@ -262,27 +312,34 @@ def test_compiled_qgrbpf_second_update_equals_the_textbook_one_on_the_lateral_mo
         filters[0].rng = np.random.default_rng(k)
 
 
-@pytest.mark.parametrize("kernel", ["stack_matmul", "_symmetric_abt"])
+@pytest.mark.parametrize("kernel", ["stack_matmul", "_symmetric_abt", "_innovation_block"])
 def test_bank_products_use_packed_fma_where_the_cpu_has_it(kernel):
-    """The Kalman bank's two products (F P, then F P Fᵀ + Q and the S of the update) run their
-    lane loops as vectors: packed FMA (``vfmadd…pd`` on ymm/zmm) in the machine code compiled
-    afresh with the kernels' options (a copy loaded from numba's cache carries no assembly)."""
+    """The Kalman bank's products (F P, then F P Fᵀ + Q; the update's H P⁻ and S over H's
+    nonzeros) run their lane loops as vectors: packed FMA (``vfmadd…pd`` on ymm/zmm) in the
+    machine code compiled afresh with the kernels' options (a copy loaded from numba's cache
+    carries no assembly)."""
     import re
 
     import llvmlite.binding as ll
     import numba
 
     from railpaper.engine.batch_expm import stack_matmul
-    from railpaper.engine.kalman_bank import _symmetric_abt
+    from railpaper.engine.kalman_bank import _innovation_block, _symmetric_abt
     if not ll.get_host_cpu_features().get("fma"):
         pytest.skip("host CPU without FMA")
-    f = {"stack_matmul": stack_matmul, "_symmetric_abt": _symmetric_abt}[kernel]
+    f = {"stack_matmul": stack_matmul, "_symmetric_abt": _symmetric_abt,
+         "_innovation_block": _innovation_block}[kernel]
     options = {k: v for k, v in f.targetoptions.items() if k not in ("cache", "nopython")}
     fresh = numba.njit(**options)(f.py_func)
     A = np.ones((4, 4, 16))
     if kernel == "stack_matmul":
         fresh(A, A, np.empty_like(A))
-    else:
+    elif kernel == "_symmetric_abt":
         fresh(A, A, np.ones((1, 4, 4)), 0, 0, np.empty_like(A))
+    else:
+        p, n, nb = 2, 4, 16
+        work = kalman_bank._innovation_workspace(n, p, nb, True)
+        fresh(np.ones((p, n, nb)), np.tile(np.arange(n), (p, 1)), np.full(p, n), A,
+              np.ones((n, nb)), np.ones(p), np.eye(p)[None], 0, 0, True, *work)
     asm = "\n".join(fresh.inspect_asm().values())
     assert re.search(r"vfmadd\w*pd\s[^\n]*%[yz]mm", asm)
