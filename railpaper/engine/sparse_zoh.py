@@ -182,12 +182,16 @@ def _finish_block(x, lo, d, rows, cols, rowptr, n, tol, kmax, F, G):  # pragma: 
         for e in range(nnz):
             x[e, q] *= 0.5 ** S[q]                    # X / 2^s, exact
     W = _block(x, K, S, rows, cols, rowptr, n, p)
-    for q in range(nb):                               # undo the balancing: D e^X D⁻¹
+    ratio = np.empty((n, p))                          # undo the balancing: D e^X D⁻¹
+    for i in range(n):
+        for j in range(p):
+            ratio[i, j] = d[i] / d[j]                 # once per block, not once per matrix
+    for q in range(nb):
         for i in range(n):
             for j in range(n):
-                F[lo + q, i, j] = W[i, j, q] * (d[i] / d[j])
+                F[lo + q, i, j] = W[i, j, q] * ratio[i, j]
             for j in range(m):
-                G[lo + q, i, j] = W[i, n + j, q] * (d[i] / d[n + j])
+                G[lo + q, i, j] = W[i, n + j, q] * ratio[i, n + j]
 
 
 @numba.njit(parallel=True, cache=True)
