@@ -64,6 +64,7 @@ from railpaper.engine.linear_gaussian import (LinearGaussianBatch, concat_system
 from railpaper.engine.particles import (gaussian_log_density, normalise_log_weight_columns,
                                         systematic_resample, weighted_mean_cov,
                                         weighted_quantiles)
+from railpaper.memory import keep_freed_memory
 
 PROPOSALS = ("rw", "independent")
 
@@ -371,6 +372,7 @@ def run_ibis(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
     """
     if proposal not in PROPOSALS:
         raise ValueError(f"proposal must be one of {PROPOSALS}, got {proposal!r}")
+    keep_freed_memory()              # the moves' re-runs reuse the process's memory
     y = np.atleast_2d(np.asarray(y, float))
     u = None if u is None else np.asarray(u, float).reshape(len(y), -1)
     lower, upper = np.atleast_1d(np.asarray(lower, float)), np.atleast_1d(np.asarray(upper, float))

@@ -74,6 +74,7 @@ from railpaper.engine.rbpf import (
     mixture_moments,
     run_filter,
 )
+from railpaper.memory import keep_freed_memory
 
 WEIGHTINGS = ("ratio", "printed")
 
@@ -113,6 +114,7 @@ class QuasiGaussianRBPF:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
         if engine not in ENGINES:
             raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        keep_freed_memory()          # the per-step arrays reuse the process's memory
         self.engine = engine
         self.system, self.rng, self.weighting = system, rng, weighting
         self.weight_threshold, self.search = float(weight_threshold), bool(search)

@@ -46,6 +46,7 @@ from railpaper.engine.particles import (
     systematic_resample,
     weighted_mean_cov,
 )
+from railpaper.memory import keep_freed_memory
 
 SCHEMES = ("paper", "working")
 ENGINES = ("compiled", "numpy")
@@ -221,6 +222,7 @@ class RaoBlackwellisedPF:
             raise ValueError(f"scheme must be one of {SCHEMES}, got {scheme!r}")
         if engine not in ENGINES:
             raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        keep_freed_memory()          # the per-step arrays reuse the process's memory
         self.engine = engine
         self.system, self.rng, self.scheme = system, rng, scheme
         self.delta, self.move = float(delta), bool(move)
