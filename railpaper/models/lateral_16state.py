@@ -21,6 +21,7 @@ kg m², ``kpx`` N/m (as it appears in ``K_px b²``), ``a, b, lbw, l0, r0`` m, ``
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.linalg import expm
 
@@ -146,6 +147,21 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
     return re, float(v0 + (v1 - v0) * (-r0) / (r1 - r0))
 
 
+@numba.njit(fastmath={"contract"}, cache=True)
+def _affine_entries(theta, base, terms, entries, out):  # pragma: no cover - compiled
+    """``out[i, e] = base[e] + Σ_k θ_ik terms[k, e]`` for the listed entries e (the others are
+    left alone): the acceleration rows of H(θ) on their nonzeros, one particle per row of θ.
+    The sum runs over k in order from zero, as BLAS's ``θ @ terms`` did (same bits)."""
+    N, d = theta.shape
+    for i in range(N):
+        for t in range(entries.shape[0]):
+            e = entries[t]
+            v = 0.0
+            for k in range(d):
+                v += theta[i, k] * terms[k, e]
+            out[i, e] = base[e] + v
+
+
 def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R: np.ndarray,
                    theta_ref: np.ndarray | None = None):
     """``system(theta (N, 5)) -> LinearGaussianBatch`` for the RBPF (exact ZOH per particle).
@@ -175,16 +191,17 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
     A0, Ak = affine_terms(fixed, speed_mps)
     B = input_matrix()
     rows = list(ACC_ROWS)
-    H0, Hk = A0[rows], Ak[:, rows].reshape(len(Ak), -1)          # (4, 16), (5, 64)
+    H0, Hk = A0[rows].ravel(), Ak[:, rows].reshape(len(Ak), -1)  # (64,), (5, 64)
+    entries = np.flatnonzero((H0 != 0) | (Hk != 0).any(axis=0))   # 20 of the 64
     prepared = [] if theta_ref is None else [   # the ZOH's pattern and balancing, made once
         AffineZOH(A0, Ak, B, dt_s, affine_balance(theta_ref, A0, Ak, B, dt_s))]
 
     def measurement(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """H(θ) (N, 5, 16) and R alone, without the ZOH (the Q-GRBPF's update needs only these
         for draws its search may drop)."""
-        theta = np.atleast_2d(np.asarray(theta, float))
+        theta = np.ascontiguousarray(np.atleast_2d(np.asarray(theta, float)))
         H = np.zeros((len(theta), len(CHANNELS), N_STATES))
-        H[:, :4] = H0 + (theta @ Hk).reshape(len(theta), 4, N_STATES)
+        _affine_entries(theta, H0, Hk, entries, H.reshape(len(theta), -1))
         H[:, 4, YAW_RATE_STATE] = 1.0
         return H, R
 
