@@ -299,7 +299,7 @@ def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, l
         for t in range(n_steps):                  # the block stays in cache over the steps
             _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
             _innovation_block(Hl, hcols, hcount, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc,
-                              z, W, logdet, bad, ll)                                # z, W, log N
+                              z, W, logdet, bad, ll)                          # z, W, log N
             _posterior_block(xp, W, z, xl, Pl)                                # x, P
             for q in range(nb):
                 loglik[lo + q, t] = ll[q]

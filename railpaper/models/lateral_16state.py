@@ -25,6 +25,7 @@ import numba
 import numpy as np
 from scipy.linalg import expm
 
+from railpaper.engine.kernel_arrays import kernel_array
 from railpaper.engine.sparse_zoh import AffineZOH, affine_balance
 from railpaper.discretise import simulate_zoh, zoh
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
@@ -151,7 +152,7 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
 def _affine_entries(theta, base, terms, entries, out):  # pragma: no cover - compiled
     """``out[i, e] = base[e] + Σ_k θ_ik terms[k, e]`` for the listed entries e (the others are
     left alone): the acceleration rows of H(θ) on their nonzeros, one particle per row of θ.
-    The sum runs over k in order from zero, as BLAS's ``θ @ terms`` did (same bits)."""
+    The sum runs over k in order from zero: the bits ``θ @ terms`` (OpenBLAS) gave here."""
     N, d = theta.shape
     for i in range(N):
         for t in range(entries.shape[0]):
@@ -199,7 +200,7 @@ def lateral_system(fixed: dict, speed_mps: float, dt_s: float, Q: np.ndarray, R:
     def measurement(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """H(θ) (N, 5, 16) and R alone, without the ZOH (the Q-GRBPF's update needs only these
         for draws its search may drop)."""
-        theta = np.ascontiguousarray(np.atleast_2d(np.asarray(theta, float)))
+        theta = kernel_array(np.atleast_2d(np.asarray(theta, float)))
         H = np.zeros((len(theta), len(CHANNELS), N_STATES))
         _affine_entries(theta, H0, Hk, entries, H.reshape(len(theta), -1))
         H[:, 4, YAW_RATE_STATE] = 1.0
