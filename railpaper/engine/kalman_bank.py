@@ -9,8 +9,9 @@ measurement update and the predictive log-likelihood of every filter.  The same 
 two, for a filter whose update matrices are known only after its weights (the Q-GRBPF, whose
 H(θ) is that of the new θ): :func:`kalman_predict` (time update and predictive
 log-likelihood, no gain, no covariance update) and :func:`kalman_update` (measurement update
-of a stored prior); both kernels share :func:`_kf_run`'s block functions, so predict + update
-gives the fused step's bits.  It is written for speed, not generality:
+of a stored prior, kept between the two in the kernels' block layout: :class:`BankPrior`); both
+kernels share :func:`_kf_run`'s block functions, so predict + update gives the fused step's
+bits.  It is written for speed, not generality:
 
 * numba, parallel over blocks of ``BLOCK`` filters (``prange``); inside a block every operation
   runs over the filters in the innermost loop (structure of arrays), so each scalar formula of a
@@ -35,6 +36,7 @@ kernel), so every call has the same compiled signature.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -312,12 +314,14 @@ def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, l
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_prior, P_prior,
+def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_blocks, P_blocks,
                 loglik, block):  # pragma: no cover - compiled
     """Time update and predictive log-likelihood of every filter, no measurement update: the
     same arithmetic as the first half of :func:`_kf_run`'s step, without the gain.  Filter i
-    starts from x, P at ``ancestors[i]`` and uses the matrices at ``rows[i]``."""
-    N, n = x_prior.shape
+    starts from x, P at ``ancestors[i]`` and uses the matrices at ``rows[i]``; the priors stay
+    in block layout (``x_blocks`` (n_blocks, n, block), ``P_blocks`` (n_blocks, n, n, block)),
+    a contiguous copy instead of the scatter's transpose."""
+    N, n = loglik.shape[0], x.shape[1]
     p = H.shape[1]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
@@ -340,14 +344,20 @@ def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_pri
                           logdet, bad, ll)                                # log N(y; Hx⁻, S)
         for q in range(nb):
             loglik[lo + q] = ll[q]
-        _scatter_block(xp, Pl, lo, x_prior, P_prior)
+        for i in range(n):                        # the block as it is: no transpose
+            for q in range(nb):
+                x_blocks[b, i, q] = xp[i, q]
+            for j in range(n):
+                for q in range(nb):
+                    P_blocks[b, i, j, q] = Pl[i, j, q]
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
-def _kf_update(x_prior, P_prior, H, hcols, hcount, R, y, x_out, P_out, loglik,
+def _kf_update(x_blocks, P_blocks, H, hcols, hcount, R, y, x_out, P_out, loglik,
                block):  # pragma: no cover - compiled
-    """Measurement update of every filter from its stored prediction: the same arithmetic as
-    the second half of :func:`_kf_run`'s step."""
+    """Measurement update of every filter from its prior in block layout (as
+    :func:`_kf_predict` leaves it): the same arithmetic as the second half of
+    :func:`_kf_run`'s step."""
     N, n = x_out.shape
     p = H.shape[1]
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
@@ -356,8 +366,13 @@ def _kf_update(x_prior, P_prior, H, hcols, hcount, R, y, x_out, P_out, loglik,
         lo = b * block
         nb = min(block, N - lo)
         Pl, Hl, xp = np.empty((n, n, nb)), np.empty((p, n, nb)), np.empty((n, nb))
+        for i in range(n):                        # the block as it is: no transpose
+            for q in range(nb):
+                xp[i, q] = x_blocks[b, i, q]
+            for j in range(n):
+                for q in range(nb):
+                    Pl[i, j, q] = P_blocks[b, i, j, q]
         own = np.arange(lo, lo + nb)
-        _gather_block(x_prior, P_prior, own, xp, Pl)
         _gather_matrix(H, own, sH, Hl)
         xl = np.empty((n, nb))
         HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
@@ -539,15 +554,65 @@ def _indices(a: np.ndarray | None, N: int, default: int, name: str) -> np.ndarra
     return a
 
 
+@dataclass(frozen=True)
+class BankPrior:
+    """The priors x⁻, P⁻ of N filters, held as the kernels hold them: blocks of ``block``
+    filters with the filters last (``x_blocks`` (n_blocks, n, block), ``P_blocks``
+    (n_blocks, n, n, block); the last block's unused lanes are never read).
+    :func:`kalman_predict` leaves them so and :func:`kalman_update` reads them so, with no
+    transpose to (N, n, n) and back in between (the Q-GRBPF's two calls a step).  ``x`` and
+    ``P`` give them as (N, n), (N, n, n); :meth:`from_arrays` makes one from those."""
+
+    x_blocks: np.ndarray
+    P_blocks: np.ndarray
+    n_filters: int
+
+    @property
+    def block(self) -> int:
+        return self.x_blocks.shape[2]
+
+    @property
+    def x(self) -> np.ndarray:
+        """x⁻ (N, n)."""
+        n = self.x_blocks.shape[1]
+        return np.swapaxes(self.x_blocks, 1, 2).reshape(-1, n)[:self.n_filters].copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        """P⁻ (N, n, n)."""
+        n = self.x_blocks.shape[1]
+        return np.moveaxis(self.P_blocks, 3, 1).reshape(-1, n, n)[:self.n_filters].copy()
+
+    @classmethod
+    def from_arrays(cls, x_prior: np.ndarray, P_prior: np.ndarray) -> "BankPrior":
+        """The priors x⁻ (N, n), P⁻ (N, n, n) in the kernels' blocks (:func:`block_size`)."""
+        x_prior, P_prior = np.asarray(x_prior, float), np.asarray(P_prior, float)
+        N, n = x_prior.shape
+        if P_prior.shape != (N, n, n):
+            raise ValueError(f"BankPrior: P_prior must be ({N}, {n}, {n}), got {P_prior.shape}")
+        prior = _empty_prior(N, n)
+        k, block = prior.x_blocks.shape[0], prior.block
+        x_pad, P_pad = np.zeros((k * block, n)), np.zeros((k * block, n, n))
+        x_pad[:N], P_pad[:N] = x_prior, P_prior
+        prior.x_blocks[:] = np.swapaxes(x_pad.reshape(k, block, n), 1, 2)
+        prior.P_blocks[:] = np.moveaxis(P_pad.reshape(k, block, n, n), 1, 3)
+        return prior
+
+
+def _empty_prior(N: int, n: int) -> BankPrior:
+    block = block_size(N)
+    k = (N + block - 1) // block
+    return BankPrior(np.empty((k, n, block)), np.empty((k, n, n, block)), N)
+
+
 def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,
                    u: np.ndarray | None = None, ancestors: np.ndarray | None = None,
-                   matrix_rows: np.ndarray | None = None
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   matrix_rows: np.ndarray | None = None) -> tuple[BankPrior, np.ndarray]:
     """Time update and predictive log-likelihood of N Kalman filters, no measurement update.
 
     For a filter whose measurement update uses matrices known only after its weight (the
     Q-GRBPF's step (4) with H(θ) of the new θ): :func:`kalman_update` of the returned prior
-    completes the step.  ``kalman_update(*kalman_predict(x, P, s, y, u)[:2], y, s.H, s.R)``
+    completes the step.  ``kalman_update(kalman_predict(x, P, s, y, u)[0], y, s.H, s.R)``
     equals :func:`kalman_step` ``(x, P, s, y, u)`` (same arithmetic, in two kernels).
 
     Parameters are those of :func:`kalman_step`, and
@@ -561,8 +626,9 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
 
     Returns
     -------
-    x_prior : (N, n), P_prior : (N, n, n)
-        ``x⁻ = F x + B u``, ``P⁻ = F P Fᵀ + Q``.
+    prior : BankPrior
+        ``x⁻ = F x + B u``, ``P⁻ = F P Fᵀ + Q`` in the kernels' block layout (``prior.x``,
+        ``prior.P`` as arrays).
     log_likelihood : (N,)
         ``log N(y; H x⁻, H P⁻ Hᵀ + R)``; −inf where that S is not positive definite.
     """
@@ -579,17 +645,17 @@ def kalman_predict(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y:
     if B is None or u is None:
         B, u = None, np.zeros(1)
     u = kernel_array(np.asarray(u, float).reshape(-1))
-    x_prior, P_prior, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
+    prior, loglik = _empty_prior(N, n), np.empty(N)
     H = _stack(system.H, (p, n))
     _kf_predict(x, kernel_array(P), _stack(system.F, (n, n)),
                 _stack(system.Q, (n, n)), _stack(B, (n, 1)), u, H, *measurement_pattern(H),
-                _stack(system.R, (p, p)), y, ancestors, matrix_rows, x_prior, P_prior,
-                loglik, block_size(N))
-    return x_prior, P_prior, loglik
+                _stack(system.R, (p, p)), y, ancestors, matrix_rows, prior.x_blocks,
+                prior.P_blocks, loglik, prior.block)
+    return prior, loglik
 
 
-def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np.ndarray,
-                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def kalman_update(prior: BankPrior, y: np.ndarray, H: np.ndarray, R: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Measurement update of N Kalman filters from their priors, in one compiled pass.
 
     The update of :func:`kalman_step` (whitened gain ``W = L⁻¹ H P⁻``, ``S = L Lᵀ``)::
@@ -599,9 +665,9 @@ def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np
 
     Parameters
     ----------
-    x_prior : ndarray, (N, n)
-    P_prior : ndarray, (N, n, n)
-        Prior means and covariances (e.g. from :func:`kalman_predict`).
+    prior : BankPrior
+        Prior means and covariances: from :func:`kalman_predict`, or
+        ``BankPrior.from_arrays(x_prior (N, n), P_prior (N, n, n))``.
     y : ndarray, (p,)
         Measurement shared by all filters.
     H : ndarray, (p, n) or (N, p, n)
@@ -613,12 +679,14 @@ def kalman_update(x_prior: np.ndarray, P_prior: np.ndarray, y: np.ndarray, H: np
         ``log N(y; H x⁻, H P⁻ Hᵀ + R)`` with these H, R.  Where S is not positive definite
         that filter is not updated (x = x⁻, P = P⁻) and its log-likelihood is −inf.
     """
-    x_prior = kernel_array(x_prior)
-    N, n = x_prior.shape
+    if not isinstance(prior, BankPrior):
+        raise TypeError("kalman_update: prior must be a BankPrior (kalman_predict's, or "
+                        "BankPrior.from_arrays(x_prior, P_prior))")
+    N, n = prior.n_filters, prior.x_blocks.shape[1]
     y = kernel_array(np.asarray(y, float).reshape(-1))
     p = y.shape[0]
     x_out, P_out, loglik = np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
     H = _stack(H, (p, n))
-    _kf_update(x_prior, kernel_array(P_prior), H, *measurement_pattern(H),
-               _stack(R, (p, p)), y, x_out, P_out, loglik, block_size(N))
+    _kf_update(prior.x_blocks, prior.P_blocks, H, *measurement_pattern(H),
+               _stack(R, (p, p)), y, x_out, P_out, loglik, prior.block)
     return x_out, P_out, loglik

@@ -146,8 +146,8 @@ class QuasiGaussianRBPF:
         n_particles = self.theta.shape[0]
         s = self.sys
         if self.engine == "compiled":    # x⁻, P⁻ kept for (4): no posterior covariance here
-            x_prior, P_prior, loglik = kalman_predict(self.x, self.P, s, y, u,  # (6), (1)
-                                                      self.ancestors, self.matrix_rows)
+            prior, loglik = kalman_predict(self.x, self.P, s, y, u,            # (6), (1)
+                                           self.ancestors, self.matrix_rows)
         else:
             x_post, P_post, loglik = bank_step(self.x, self.P, s, y, u, self.engine)  # (6), (1)
         w, log_norm, degenerate = normalise_log_weights(loglik)             # Eq. 6
@@ -170,7 +170,7 @@ class QuasiGaussianRBPF:
             s_new = self.system(theta_new)
             H_new, R_new = s_new.H, s_new.R
         if self.engine == "compiled":       # (4): Eqs. 12-15, the old particle's prediction,
-            x, P, _ = kalman_update(x_prior, P_prior, y, H_new, R_new)        # the new θ's H, R
+            x, P, _ = kalman_update(prior, y, H_new, R_new)                   # the new θ's H, R
         elif _same_measurement_model(s, s_new):
             x, P = x_post, P_post            # H, R do not depend on θ: same update as in (1)
         else:

@@ -40,9 +40,9 @@ def test_bank_compiles_once_for_read_only_inputs():
     kernels = (kalman_bank._kf_run, kalman_bank._kf_predict, kalman_bank._kf_update)
 
     def every_entry(x, P, s, Y, U):
-        prior = kalman_bank.kalman_predict(x, P, s, Y[0], U[0])
-        return (*kalman_bank.kalman_run(x, P, s, Y, U, record=True), *prior,
-                *kalman_bank.kalman_update(*prior[:2], Y[0], s.H, s.R))
+        prior, loglik = kalman_bank.kalman_predict(x, P, s, Y[0], U[0])
+        return (*kalman_bank.kalman_run(x, P, s, Y, U, record=True), prior.x, prior.P, loglik,
+                *kalman_bank.kalman_update(prior, Y[0], s.H, s.R))
     writable = every_entry(x, P, system, Y, U)
     compiled = [len(k.signatures) for k in kernels]
     frozen = every_entry(*read_only(x, P), frozen_system, *read_only(Y, U))

@@ -11,7 +11,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 
 from railpaper.engine.kalman import innovation, predict
-from railpaper.engine.kalman_bank import kalman_predict, kalman_step, kalman_update
+from railpaper.engine.kalman_bank import BankPrior, kalman_predict, kalman_step, kalman_update
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
 
@@ -41,7 +41,7 @@ def test_kalman_update_equals_filterpy_update_of_the_given_prior(per_filter_R):
     R = (np.stack([random_spd(rng, p) for _ in range(N)]) if per_filter_R
          else random_spd(rng, p))
     y = rng.standard_normal(p)
-    x_post, P_post, loglik = kalman_update(x_prior, P_prior, y, H, R)
+    x_post, P_post, loglik = kalman_update(BankPrior.from_arrays(x_prior, P_prior), y, H, R)
     for i in range(N):
         kf = KalmanFilter(dim_x=n, dim_z=p)
         kf.x, kf.P = x_prior[i].copy(), P_prior[i].copy()
@@ -57,7 +57,8 @@ def test_kalman_update_keeps_the_prior_where_S_is_not_positive_definite():
     rng = np.random.default_rng(2)
     R = np.stack([np.eye(2), -np.eye(2)])
     x, P = rng.standard_normal((2, 2)), np.stack([random_spd(rng, 2), random_spd(rng, 2)])
-    x_post, P_post, loglik = kalman_update(x, P, np.ones(2), np.eye(2), R)
+    prior = BankPrior.from_arrays(x, P)
+    x_post, P_post, loglik = kalman_update(prior, np.ones(2), np.eye(2), R)
     assert np.isfinite(loglik[0]) and np.isneginf(loglik[1])
     assert np.array_equal(x_post[1], x[1]) and np.array_equal(P_post[1], P[1])
 
@@ -69,12 +70,18 @@ def test_predict_then_update_is_the_fused_kalman_step_bit_for_bit(N):
     rng = np.random.default_rng(N)
     s, x, P, y, u = random_bank(rng, N)
     ancestors = rng.integers(0, N, N)
-    x_prior, P_prior, loglik = kalman_predict(x, P, s, y, u, ancestors)
-    split = kalman_update(x_prior, P_prior, y, s.H, s.R)
+    prior, loglik = kalman_predict(x, P, s, y, u, ancestors)
+    split = kalman_update(prior, y, s.H, s.R)
     fused = kalman_step(x, P, s, y, u, ancestors)
     for a, b in zip(split, fused):
         assert np.array_equal(a, b)
     assert np.array_equal(loglik, fused[2])
+    x_prior, P_prior = prior.x, prior.P                 # out of the blocks and back: same bits
+    again = kalman_update(BankPrior.from_arrays(x_prior, P_prior), y, s.H, s.R)
+    for a, b in zip(again, fused):
+        assert np.array_equal(a, b)
+    with pytest.raises(TypeError, match="BankPrior"):
+        kalman_update(x_prior, y, s.H, s.R)
     xr, Pr = predict(x[ancestors], P[ancestors], s.F, s.Q, s.B, u)
     np.testing.assert_allclose(x_prior, xr, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(P_prior, Pr, rtol=1e-12, atol=1e-14)
@@ -92,10 +99,11 @@ def test_predict_with_matrix_rows_continues_whole_filters(per_filter):
         s = LinearGaussianBatch(s.F, np.stack([random_spd(rng, 5) for _ in range(N)]), s.H,
                                 np.stack([random_spd(rng, 3) for _ in range(N)]), s.B)
     idx = rng.integers(0, N, N)
-    gathered = kalman_predict(x, P, s, y, u, idx, idx)
-    copied = kalman_predict(x[idx], P[idx], s.take(idx), y, u)
-    for a, b in zip(gathered, copied):
-        assert np.array_equal(a, b)
+    (gathered, ll_gathered), (copied, ll_copied) = (kalman_predict(x, P, s, y, u, idx, idx),
+                                                    kalman_predict(x[idx], P[idx], s.take(idx),
+                                                                   y, u))
+    assert np.array_equal(gathered.x, copied.x) and np.array_equal(gathered.P, copied.P)
+    assert np.array_equal(ll_gathered, ll_copied)
     with pytest.raises(ValueError, match="matrix_rows"):
         kalman_predict(x, P, s, y, u, matrix_rows=np.array([N]))
 
