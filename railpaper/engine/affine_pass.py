@@ -42,7 +42,7 @@ from railpaper.engine.linear_gaussian import AffineSystem
 
 
 # ----------------------------------------------------------------------------- pieces
-@numba.njit(fastmath={"contract"}, cache=True)
+@numba.njit(fastmath={"contract"}, error_model="numpy", cache=True)
 def _kalman_bank(theta, x, P, F0, Ft, B0, Bt, u, Q, H, R, y, loglik, ws):  # pragma: no cover
     """Predict + update of every particle's filter in place, F_i = F0 + Σ θ_ij F_j:
 

@@ -95,7 +95,7 @@ def _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP):  # pragma: no cover
     _symmetric_abt(FP, Fl, Q, lo, sQ, Pl)  # P⁻ = F P Fᵀ + Q; it overwrites Pl
 
 
-@numba.njit(fastmath={"contract"}, cache=True)
+@numba.njit(fastmath={"contract"}, error_model="numpy", cache=True)
 def _innovation_block(Hl, hcols, hcount, Pl, xp, y, R, sR, lo, gain, HP, S, v, Lc, z, W,
                       logdet, bad, loglik):  # pragma: no cover - compiled
     """Predictive log-likelihood of a block, ``loglik`` = log N(y; H x⁻, H P⁻ Hᵀ + R), with the
