@@ -554,7 +554,7 @@ def _indices(a: np.ndarray | None, N: int, default: int, name: str) -> np.ndarra
     return a
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)               # arrays: no elementwise ==
 class BankPrior:
     """The priors x⁻, P⁻ of N filters, held as the kernels hold them: blocks of ``block``
     filters with the filters last (``x_blocks`` (n_blocks, n, block), ``P_blocks``
