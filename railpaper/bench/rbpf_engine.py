@@ -308,7 +308,7 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
     repeats = repeats or (QUICK_REPEATS if quick else REPEATS)
     sizes = (dict(working=40, paper=10, fp_working=6, fp_paper=2) if smoke else
              dict(working=200 if quick else 1000, paper=40 if quick else 200,
-                  fp_working=30 if quick else 150, fp_paper=6 if quick else 25))
+                  fp_working=30 if quick else 150, fp_paper=20 if quick else 25))
     steady = dict(skip=1000 if quick else 2000, steps=50 if smoke else 200 if quick else 1000)
     prob = lateral_problem(max(sizes["working"], steady["skip"] + steady["steps"]) + 10)
     progress("railpaper bench: compiling kernels")
