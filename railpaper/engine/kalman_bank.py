@@ -263,6 +263,20 @@ def _scatter_block(xl, Pl, lo, x_out, P_out):  # pragma: no cover - compiled
                 P_out[lo + q, i, j] = Pl[i, j, q]
 
 
+@numba.njit(fastmath={"contract"}, cache=True)
+def _copy_lanes(x_src, P_src, x_dst, P_dst, nb):  # pragma: no cover - compiled
+    """Lanes 0..nb−1 of a block's x (n, ·) and P (n, n, ·) into another block's: the
+    contiguous copy that keeps a prior in block layout between :func:`_kf_predict` and
+    :func:`_kf_update` (:class:`BankPrior`)."""
+    n = x_src.shape[0]
+    for i in range(n):
+        for q in range(nb):
+            x_dst[i, q] = x_src[i, q]
+        for j in range(n):
+            for q in range(nb):
+                P_dst[i, j, q] = P_src[i, j, q]
+
+
 @numba.njit(cache=True)
 def _innovation_workspace(n, p, nb, gain):  # pragma: no cover - compiled
     """Scratch arrays of :func:`_innovation_block` for a block of nb filters: ``HP`` (H P⁻),
@@ -344,12 +358,7 @@ def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_blo
                           logdet, bad, ll)                                # log N(y; Hx⁻, S)
         for q in range(nb):
             loglik[lo + q] = ll[q]
-        for i in range(n):                        # the block as it is: no transpose
-            for q in range(nb):
-                x_blocks[b, i, q] = xp[i, q]
-            for j in range(n):
-                for q in range(nb):
-                    P_blocks[b, i, j, q] = Pl[i, j, q]
+        _copy_lanes(xp, Pl, x_blocks[b], P_blocks[b], nb)   # the block as it is: no transpose
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
@@ -366,12 +375,7 @@ def _kf_update(x_blocks, P_blocks, H, hcols, hcount, R, y, x_out, P_out, loglik,
         lo = b * block
         nb = min(block, N - lo)
         Pl, Hl, xp = np.empty((n, n, nb)), np.empty((p, n, nb)), np.empty((n, nb))
-        for i in range(n):                        # the block as it is: no transpose
-            for q in range(nb):
-                xp[i, q] = x_blocks[b, i, q]
-            for j in range(n):
-                for q in range(nb):
-                    Pl[i, j, q] = P_blocks[b, i, j, q]
+        _copy_lanes(x_blocks[b], P_blocks[b], xp, Pl, nb)   # the block as it is: no transpose
         own = np.arange(lo, lo + nb)
         _gather_matrix(H, own, sH, Hl)
         xl = np.empty((n, nb))
