@@ -243,8 +243,9 @@ def _call_cost_lines(g: dict) -> list[str]:
             f"{c['steps_of_long_call']}-step call takes {c['per_step_in_long_call_ms']:.2f} ms): "
             "mostly gathering every filter's x, P, F and H from the library's particle-first "
             "arrays into the kernel's blocks and scattering x, P back. The paper scheme pays it "
-            "at every step, the Q-GRBPF twice (its prediction and its update are two calls), "
-            "the working scheme once per call of several steps."]
+            "at every step; the Q-GRBPF makes two calls a step, but its prediction stays in the "
+            "kernel's blocks for its update, which gathers only H; the working scheme pays it "
+            "once per call of several steps."]
 
 
 def findings_markdown(payload: dict) -> str:
