@@ -1,6 +1,6 @@
 """The contract every chapter's experiment module follows.
 
-A chapter module defines::
+A chapter's ``spec`` module defines::
 
     SPEC = ChapterSpec(
         name="reduced-order-observer",
@@ -10,22 +10,42 @@ A chapter module defines::
         parameters=[Parameter("speeds_kmh", [60, 100], "list[float]", "simulated speeds, km/h",
                               quick=None, positive=True), ...],
     )
+    Settings = SPEC.settings_type      # the chapter's frozen, typed settings
 
-    def run(*, quick=False, progress=None, **parameters) -> ChapterResult: ...
+and its experiment module::
 
-``quick`` selects the chapter's stated quick sizes; every metric key, time-series column and
-figure of a full run also exists in a quick run.  ``progress`` is an optional callable
+    def run(settings: Settings, *, progress=None) -> ChapterResult: ...
+
+``SPEC.resolve(overrides, quick)`` gives a checked ``Settings``: the defaults (the chapter's
+stated quick sizes with ``quick``) updated by the user's values.  Every metric key, time-series
+column and figure of a full run also exists in a quick run.  ``progress`` is an optional callable
 ``progress(fraction: float, message: str)`` for long runs.
+
+>>> from railpaper.experiments.base import ChapterSpec, Parameter
+>>> spec = ChapterSpec("demo", "Demo", "", "demo.ipynb", [
+...     Parameter("speeds_kmh", [60, 100], "list[float]", "speeds, km/h", quick=[60]),
+...     Parameter("n_records", 200, "int", "records", quick=40, changes_records=False)])
+>>> settings = spec.resolve({}, quick=True)
+>>> settings.speeds_kmh, settings.n_records
+((60.0,), 40)
+>>> settings.record_key()
+{'speeds_kmh': [60.0]}
+>>> settings.replace(n_records=0.5)
+Traceback (most recent call last):
+...
+railpaper.experiments.base.ParameterError: parameter 'n_records' expects an integer, got 0.5
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 import pandas as pd
@@ -60,6 +80,11 @@ class Parameter:
     path : bool
         A ``str`` naming a file: a non-empty value is made absolute against the caller's working
         directory (the notebook kernel runs in a staging directory, elsewhere).
+    changes_records : bool
+        Whether the value changes the numbers of a Monte Carlo record of a given seed (the
+        model, the noise, a filter's tuning: True) or only which records are run and what is
+        shown of them (sample sizes, figure choices, timing: False).  The evidence store keys
+        its rows by the fields that do; the safe default is True.
     """
 
     name: str
@@ -70,6 +95,18 @@ class Parameter:
     positive: bool = False
     minimum: float | None = None
     path: bool = False
+    changes_records: bool = True
+
+    @property
+    def annotation(self) -> Any:
+        """The field type of :class:`ChapterSettings` (lists are held as tuples: frozen)."""
+        return {"int": int, "float": float, "bool": bool, "str": str,
+                "list[float]": tuple[float, ...], "list[int]": tuple[int, ...]}[self.type]
+
+    def settle(self, value: Any) -> Any:
+        """:meth:`coerce`, with a list held as a tuple (the settings are frozen)."""
+        value = self.coerce(value)
+        return tuple(value) if isinstance(value, list) else value
 
     def coerce(self, value: Any) -> Any:
         """Check and convert a user value; raise :class:`ParameterError` with one line."""
@@ -109,9 +146,48 @@ class Parameter:
         raise AssertionError(self.type)
 
 
+class ChapterSettings:
+    """Base of every chapter's settings: a frozen dataclass made by :class:`ChapterSpec` from its
+    parameters (one field per parameter, its type, default, meaning and whether it changes a
+    record's numbers in the field's ``metadata``).  Every value is checked when made, by
+    :meth:`Parameter.coerce`: a wrong type or a non-physical value is one line of
+    :class:`ParameterError`, whether the settings come from :meth:`ChapterSpec.resolve`,
+    ``Settings(...)`` or :meth:`replace`."""
+
+    spec: ClassVar["ChapterSpec"]
+
+    def __post_init__(self) -> None:
+        for parameter in self.spec.parameters:
+            object.__setattr__(self, parameter.name, parameter.settle(getattr(self, parameter.name)))
+
+    def replace(self, **changes: Any) -> "ChapterSettings":
+        """A copy with ``changes`` (checked; an unknown name is one line, with the closest)."""
+        for name in changes:
+            self.spec.parameter(name)
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The values as plain JSON-ready Python (tuples as lists): ``metrics.json``'s
+        ``parameters``, a notebook's overrides, a sweep's row."""
+        return {f.name: list(value) if isinstance(value := getattr(self, f.name), tuple) else value
+                for f in dataclasses.fields(self)}
+
+    def record_key(self) -> dict[str, Any]:
+        """The values that change a Monte Carlo record's numbers (``changes_records``): with the
+        chapter, the study and the seed, the key of a record in the evidence store."""
+        values = self.as_dict()
+        return {f.name: values[f.name] for f in dataclasses.fields(self)
+                if f.metadata["changes_records"]}
+
+
+def _camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.replace("_", "-").split("-"))
+
+
 @dataclass(frozen=True)
 class ChapterSpec:
-    """What the pipeline needs to know about a chapter."""
+    """What the pipeline needs to know about a chapter, and the type of its settings
+    (:attr:`settings_type`, a frozen dataclass of :class:`ChapterSettings`)."""
 
     name: str
     title: str
@@ -122,6 +198,23 @@ class ChapterSpec:
     #: Parameter values the chapter's notebook needs; other values of these parameters are
     #: for Monte Carlo samples of ``railpaper sweep`` only (e.g. a sample without side studies).
     notebook_requires: dict[str, Any] = field(default_factory=dict)
+    #: The chapter's settings: a frozen dataclass, one typed field per parameter, made here; the
+    #: chapter's ``spec`` module binds it as ``Settings`` (pickle finds it there by name).
+    settings_type: type = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        fields = [(p.name, p.annotation,
+                   field(default=tuple(p.default) if isinstance(p.default, list) else p.default,
+                         metadata={"meaning": p.meaning, "changes_records": p.changes_records}))
+                  for p in self.parameters]
+        settings_type = dataclasses.make_dataclass(
+            f"{_camel(self.name)}Settings", fields, bases=(ChapterSettings,), frozen=True,
+            namespace={"spec": self, "__doc__": f"Settings of chapter ``{self.name}``: "
+                       + "; ".join(f"``{p.name}`` {p.meaning}" for p in self.parameters)})
+        # Where the spec is made (its module binds it as ``Settings``), as namedtuple does.
+        settings_type.__module__ = sys._getframe(2).f_globals.get("__name__", __name__)
+        settings_type.__qualname__ = "Settings"
+        object.__setattr__(self, "settings_type", settings_type)
 
     def parameter(self, name: str) -> Parameter:
         for p in self.parameters:
@@ -131,23 +224,26 @@ class ChapterSpec:
         hint = f" (did you mean '{close[0]}'?)" if close else ""
         raise ParameterError(f"chapter '{self.name}' has no parameter '{name}'{hint}")
 
-    def resolve(self, overrides: dict[str, Any], quick: bool = False) -> dict[str, Any]:
-        """Full parameter dict: defaults (quick values when ``quick``) updated by checked overrides."""
+    def resolve(self, overrides: dict[str, Any] | None = None,
+                quick: bool = False) -> ChapterSettings:
+        """The chapter's checked settings: defaults (quick values when ``quick``) updated by the
+        user's ``overrides`` (names checked, one line with the closest name otherwise)."""
         values = {}
         for p in self.parameters:
             values[p.name] = p.quick if (quick and p.quick is not None) else p.default
-        for name, value in overrides.items():
-            values[name] = self.parameter(name).coerce(value)
-        return values
+        for name, value in (overrides or {}).items():
+            values[self.parameter(name).name] = value
+        return self.settings_type(**values)
 
-    def check_notebook_values(self, params: dict[str, Any]) -> None:
+    def check_notebook_values(self, settings: ChapterSettings) -> None:
         """Refuse, for the chapter's notebook, values only sweep samples may take
         (:attr:`notebook_requires`)."""
         for name, needed in self.notebook_requires.items():
-            if params[name] != needed:
+            if getattr(settings, name) != needed:
                 raise ParameterError(
-                    f"{name} = {str(params[name]).lower()} is for Monte Carlo samples (railpaper "
-                    f"sweep); the chapter's notebook needs {name} = {str(needed).lower()}")
+                    f"{name} = {str(getattr(settings, name)).lower()} is for Monte Carlo samples "
+                    f"(railpaper sweep); the chapter's notebook needs {name} = "
+                    f"{str(needed).lower()}")
 
     def defaults(self) -> dict[str, Any]:
         return {p.name: p.default for p in self.parameters}

@@ -6,15 +6,17 @@ The vehicle's data are ``data/rbpf-parameter-estimation/parameters.toml``; a rec
 (:class:`LateralRecord`) is an alignment profile driven through the 16-state model
 (:mod:`railpaper.models.lateral_16state`) simulated exactly on a fine grid, sampled at ``dt_s``
 with white sensor noise; the filters' model is the exact ZOH of A(θ) at ``dt_s``
-(:func:`filter_system`).  The parameter dictionary ``p`` carries the record's settings under the
-names of chapter 003's :data:`SPEC` (``speed_kmh``, ``dt_s``, ``truth_substeps``, ``n_steps``,
-``spectrum``, ``wavelength_min_m``, ``wavelength_max_m`` and the four ``noise_*``).
+(:func:`filter_system`).  What a record depends on besides its seed is a
+:class:`RecordSettings` (speed, sample time, truth substeps, length, track spectrum and band,
+the four sensor noises); a chapter makes one from its own settings with
+:meth:`RecordSettings.of`, which reads the fields of the same names.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +47,31 @@ TRACK_AND_SENSORS = [
     P("noise_yawrate_radps", 0.001, "float", "bogie yaw-rate gyro noise std, rad/s",
       positive=True),
 ]
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    """What a lateral record depends on besides its seed (units in the names)."""
+
+    speed_kmh: float
+    dt_s: float
+    truth_substeps: int
+    n_steps: int
+    spectrum: str
+    wavelength_min_m: float
+    wavelength_max_m: float
+    noise_acc_wheelset_mps2: float
+    noise_acc_bogie_mps2: float
+    noise_acc_body_mps2: float
+    noise_yawrate_radps: float
+
+    @classmethod
+    def of(cls, settings: Any, **changes: Any) -> "RecordSettings":
+        """The record settings held by a chapter's ``settings`` (fields of the same names), with
+        ``changes`` (e.g. the speed of one of several)."""
+        values = {f.name: changes[f.name] if f.name in changes else getattr(settings, f.name)
+                  for f in fields(cls)}
+        return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -80,74 +107,82 @@ def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
     return {k: q[k].value for k in L.FIXED_KEYS}, np.array([q[k].value for k in L.PARAM_NAMES])
 
 
-def noise_std(p: dict) -> np.ndarray:
-    """Sensor noise std of the five channels (:data:`L.CHANNELS`): m/s², m/s², m/s², m/s², rad/s."""
-    return np.array([p["noise_acc_wheelset_mps2"]] * 2 + [p["noise_acc_bogie_mps2"],
-                    p["noise_acc_body_mps2"], p["noise_yawrate_radps"]])
+def noise_std(settings: RecordSettings) -> np.ndarray:
+    """Sensor noise std of the five channels (:data:`lateral_16state.CHANNELS`): m/s², m/s²,
+    m/s², m/s², rad/s."""
+    return np.array([settings.noise_acc_wheelset_mps2] * 2 + [
+        settings.noise_acc_bogie_mps2, settings.noise_acc_body_mps2, settings.noise_yawrate_radps])
 
 
-def track_velocity(p: dict, fixed: dict, seed: int) -> np.ndarray:
+def track_velocity(settings: RecordSettings, fixed: dict, seed: int) -> np.ndarray:
     """Track lateral velocity under both wheelsets on the fine grid, (K_fine + 1, 2) m/s: an
     alignment profile of ``spectrum`` (seed ``seed``) long enough for ``n_steps`` at ``dt_s``."""
-    v = p["speed_kmh"] / 3.6
-    dtf = p["dt_s"] / p["truth_substeps"]
-    dur = p["n_steps"] * p["dt_s"]
-    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * p["wavelength_max_m"])
-    dx = min(0.05, p["wavelength_min_m"] / 2)
-    s, z = track.synthesize_profile(p["spectrum"], "alignment", length, dx, seed=seed,
-                                    wavelength_min_m=p["wavelength_min_m"],
-                                    wavelength_max_m=p["wavelength_max_m"])
+    v = settings.speed_kmh / 3.6
+    dtf = settings.dt_s / settings.truth_substeps
+    dur = settings.n_steps * settings.dt_s
+    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * settings.wavelength_max_m)
+    dx = min(0.05, settings.wavelength_min_m / 2)
+    s, z = track.synthesize_profile(settings.spectrum, "alignment", length, dx, seed=seed,
+                                    wavelength_min_m=settings.wavelength_min_m,
+                                    wavelength_max_m=settings.wavelength_max_m)
     _, _, dq = track.wheelset_inputs(s, z, v, [0.0, 2 * fixed["a"]], dtf, dur, derivative=True)
     return dq
 
 
-def sampled_record(p: dict, seed: int, states: np.ndarray, H: np.ndarray, dq: np.ndarray
-                   ) -> LateralRecord:
+def sampled_record(settings: RecordSettings, seed: int, states: np.ndarray, H: np.ndarray,
+                   dq: np.ndarray) -> LateralRecord:
     """The record the filters see: fine-grid ``states`` (K_fine + 1, 16) sampled every
     ``truth_substeps`` and read through ``H`` ((5, 16), or (n_steps, 5, 16) when the
     measurement changes with θ over the record), white sensor noise (generator ``[seed, 7]``),
     and the input u_k = ẏ_t(t_{k−1}) held over a step."""
-    sub = p["truth_substeps"]
+    sub = settings.truth_substeps
     rng = np.random.default_rng([seed, 7])
-    x = states[sub::sub][:p["n_steps"]]
+    x = states[sub::sub][:settings.n_steps]
     y = x @ H.T if H.ndim == 2 else np.einsum("kij,kj->ki", H[:len(x)], x)
-    y = y + rng.standard_normal(y.shape) * noise_std(p)
-    u = dq[0:-1:sub][:p["n_steps"]]                       # u_k = ẏt(t_{k-1}), held over the step
+    y = y + rng.standard_normal(y.shape) * noise_std(settings)
+    u = dq[0:-1:sub][:settings.n_steps]                   # u_k = ẏt(t_{k-1}), held over the step
     du = np.diff(dq[::sub], axis=0)
     return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
                          u_var_m2ps2=dq.var(axis=0))
 
 
-def simulate_lateral(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+def simulate_lateral(settings: RecordSettings, fixed: dict, theta: np.ndarray, seed: int
+                     ) -> LateralRecord:
     """One record: an alignment profile of ``spectrum`` (seed ``seed``), the vehicle simulated
     exactly at ``dt_s / truth_substeps``, the five channels sampled at ``dt_s`` with white sensor
     noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
-    v = p["speed_kmh"] / 3.6
-    dq = track_velocity(p, fixed, seed)
-    x = L.simulate_truth(fixed, theta, v, p["dt_s"] / p["truth_substeps"], dq[:-1])
+    v = settings.speed_kmh / 3.6
+    dq = track_velocity(settings, fixed, seed)
+    x = L.simulate_truth(fixed, theta, v, settings.dt_s / settings.truth_substeps, dq[:-1])
     H = L.measurement_matrix(L.build_A_direct(fixed, theta, v))
-    return sampled_record(p, seed, x, H, dq)
+    return sampled_record(settings, seed, x, H, dq)
 
 
-def filter_noise(fixed, theta, p, input_var) -> tuple[np.ndarray, np.ndarray]:
+def filter_noise(fixed, theta, settings: RecordSettings, input_var) -> tuple[np.ndarray, np.ndarray]:
     """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
-    _, G = zoh(L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6), L.input_matrix(), p["dt_s"])
+    _, G = zoh(L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6), L.input_matrix(),
+               settings.dt_s)
     Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
-    return Q, np.diag(noise_std(p) ** 2)
+    return Q, np.diag(noise_std(settings) ** 2)
 
 
-def filter_system(p: dict, fixed: dict, theta: np.ndarray, record: LateralRecord,
-                  theta_ref: np.ndarray | None = None):
+def prior_centre(theta: np.ndarray, prior_low: float, prior_high: float) -> np.ndarray:
+    """The centre of the prior box ``prior_low``..``prior_high`` (factors of the nominal θ):
+    chapter 003's balancing point of the filters' ZOH (:func:`filter_system`)."""
+    return theta * 0.5 * (prior_low + prior_high)
+
+
+def filter_system(settings: RecordSettings, fixed: dict, theta: np.ndarray,
+                  record: LateralRecord, theta_ref: np.ndarray):
     """``system(theta)``: the ZOH model E(θ), F(θ), H(θ) at ``dt_s`` for a batch of particles,
     with the process noise of the record's input changes and the sensor noise
-    (:func:`filter_noise`);
-    the ZOH's balancing is that of ``theta_ref`` (default: the centre of chapter 003's prior box
-    ``prior_low``..``prior_high``; it changes only the rounding)."""
-    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
-    if theta_ref is None:
-        theta_ref = theta * 0.5 * (p["prior_low"] + p["prior_high"])       # balancing only
-    return L.lateral_system(fixed, p["speed_kmh"] / 3.6, p["dt_s"], Q, R, theta_ref=theta_ref)
+    (:func:`filter_noise`); the ZOH's balancing is that of ``theta_ref`` (chapter 003: the prior
+    box's :func:`prior_centre`; it changes only the rounding)."""
+    Q, R = filter_noise(fixed, theta, settings, record.du_var_m2ps2)
+    return L.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s, Q, R,
+                            theta_ref=theta_ref)
 
 
-__all__ = ["LateralRecord", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise", "filter_system",
-           "noise_std", "sampled_record", "simulate_lateral", "track_velocity", "vehicle"]
+__all__ = ["LateralRecord", "RecordSettings", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise",
+           "filter_system", "noise_std", "prior_centre", "sampled_record", "simulate_lateral",
+           "track_velocity", "vehicle"]

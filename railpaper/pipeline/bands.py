@@ -119,7 +119,7 @@ def refloor(chapter: str, quick: bool) -> dict[str, tuple[float, float, str]]:
 def _batch_metrics(chapter: str, quick: bool, seed: int, work: Path) -> dict:
     out = work / f"seed-{seed}"
     path = out / "metrics.json"
-    params = chapter_spec(chapter).resolve({"seed": seed}, quick)
+    params = chapter_spec(chapter).resolve({"seed": seed}, quick).as_dict()
     if path.exists():
         run = json.loads(path.read_text())
         if run.get("parameters") == params:                # a finished batch: resume

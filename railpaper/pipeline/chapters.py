@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from railpaper.experiments import CHAPTER_MODULES, available_chapters, load_chapter
-from railpaper.experiments.base import ChapterSpec, ParameterError
+from railpaper.experiments.base import ChapterSettings, ChapterSpec, ParameterError
 from railpaper.paths import BOOK_DIR, NOTEBOOK_DIR
 from railpaper.pipeline.page import render_run_page
 from railpaper.pipeline.progress import TerminalProgress
@@ -38,15 +38,16 @@ def chapter_spec(name: str) -> ChapterSpec:
     return load_chapter(name).SPEC
 
 
-def resolve_parameters(name: str, overrides: dict | None = None, quick: bool = False) -> dict:
-    """A chapter's checked parameters: types and ranges (:meth:`ChapterSpec.resolve`), then the
+def resolve_parameters(name: str, overrides: dict | None = None,
+                       quick: bool = False) -> ChapterSettings:
+    """A chapter's checked settings: types and ranges (:meth:`ChapterSpec.resolve`), then the
     chapter's own ``validate`` (consistency, sample time, input files) — before any kernel."""
     spec = chapter_spec(name)
-    params = spec.resolve(overrides or {}, quick)
+    settings = spec.resolve(overrides or {}, quick)
     validate = getattr(load_chapter(name), "validate", None)
     if validate is not None:
-        validate(params)
-    return params
+        validate(settings)
+    return settings
 
 
 def book_chapters() -> list[str]:
@@ -206,8 +207,8 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
     import papermill
 
     spec = chapter_spec(name)
-    params = resolve_parameters(name, overrides, quick)
-    spec.check_notebook_values(params)
+    settings = resolve_parameters(name, overrides, quick)
+    spec.check_notebook_values(settings)
     out = Path(out_dir) if out_dir else default_output_dir(name)
     out = out.resolve()
     if out.exists() and not out.is_dir():
@@ -232,7 +233,7 @@ def run_chapter(name: str, overrides: dict | None = None, quick: bool = False,
             with _notebook_logs_to(kernel_log), shown:
                 papermill.execute_notebook(
                     str(source), str(staging / spec.notebook),
-                    parameters={"overrides": params, "quick": quick, "out_dir": str(staging)},
+                    parameters={"overrides": settings.as_dict(), "quick": quick, "out_dir": str(staging)},
                     kernel_name=kernel, cwd=str(staging), progress_bar=False,
                     request_save_on_cell_execute=False,
                     kernel_manager_class=_logging_kernel_manager(kernel_log))

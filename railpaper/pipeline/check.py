@@ -99,7 +99,7 @@ def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[Check
         return [CheckRow(chapter, "-", "-", "-", f"no run: {path} missing")]
     run = read_metrics(path, chapter)
     quick = bool(run.get("quick"))
-    if run.get("parameters") != spec.resolve({}, quick):
+    if run.get("parameters") != spec.resolve({}, quick).as_dict():
         return [CheckRow(chapter, "-", "-", "-",
                          "not comparable: parameters differ from the defaults of the tolerances")]
     bands = load_tolerances(chapter)["quick" if quick else "full"]

@@ -373,7 +373,7 @@ def non_default_note(chapter: str, run: dict | None) -> str:
     """One sentence when the run's parameters are not the chapter's defaults, else ''."""
     if not run:
         return ""
-    defaults = chapter_spec(chapter).resolve({}, bool(run.get("quick")))
+    defaults = chapter_spec(chapter).resolve({}, bool(run.get("quick"))).as_dict()
     changed = changed_parameters(run, defaults)
     if not changed:
         return ""

@@ -15,7 +15,7 @@ import pandas as pd
 from railpaper.data import read_toml
 
 from railpaper.paths import DATA_DIR
-from railpaper.experiments.base import ChapterResult, ChapterSpec, check_metrics
+from railpaper.experiments.base import ChapterResult, ChapterSettings, ChapterSpec, check_metrics
 
 
 def _json_ready(value: Any) -> Any:
@@ -28,7 +28,7 @@ def _json_ready(value: Any) -> Any:
     return value
 
 
-def write_outputs(out_dir: str | Path, spec: ChapterSpec, parameters: dict, quick: bool,
+def write_outputs(out_dir: str | Path, spec: ChapterSpec, settings: ChapterSettings, quick: bool,
                   result: ChapterResult) -> None:
     """Write ``metrics.json``, ``timings.json``, ``timeseries.csv``, extra tables and extra text
     files (:attr:`ChapterResult.extra_files`, verbatim) into out_dir.
@@ -39,7 +39,7 @@ def write_outputs(out_dir: str | Path, spec: ChapterSpec, parameters: dict, quic
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    base = {"chapter": spec.name, "parameters": _json_ready(parameters), "quick": bool(quick)}
+    base = {"chapter": spec.name, "parameters": _json_ready(settings.as_dict()), "quick": bool(quick)}
     metrics = dict(base, metrics=check_metrics(result.metrics))
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, sort_keys=True) + "\n")
     timings = dict(base, metrics={k: float(v) for k, v in result.timings.items()})

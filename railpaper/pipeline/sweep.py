@@ -145,7 +145,7 @@ def run_sample(chapter: str, quick: bool, overrides: dict[str, Any]) -> dict[str
     started = time.perf_counter()
     try:
         module = load_chapter(chapter)
-        result = module.run(quick=quick, **module.SPEC.resolve(overrides, quick))
+        result = module.run(module.SPEC.resolve(overrides, quick))
         metrics, status, error = check_metrics(_flatten(result.metrics)), "ok", ""
     except Exception as exc:  # noqa: BLE001 - one failing sample must not stop the sweep
         metrics, status, error = {}, "error", one_line(exc)
