@@ -1,0 +1,149 @@
+"""The evidence store and the record maps: exact round trip, reuse, extension, the spot check of
+another commit's rows, interrupted writes, chunking and workers that change no bit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from railpaper.experiments.base import ChapterSpec, Parameter
+from railpaper.experiments.records import RecordStudy, map_in_process, normalised
+from railpaper.pipeline.evidence_store import (
+    EvidenceStore,
+    EvidenceStoreError,
+    key_digest,
+    stored_map,
+)
+
+SPEC = ChapterSpec("demo", "Demo", "", "demo.ipynb", [
+    Parameter("scale_m", 1.0, "float", "scale, m"),
+    Parameter("n_records", 5, "int", "records", changes_records=False)])
+Settings = SPEC.settings_type          # pickle finds the class here (the workers' test)
+CALLS: list[tuple[int, ...]] = []
+
+
+def awkward_rows(settings, seeds):
+    """Floats that a short format would round, whole-valued floats, ints, bools, strings."""
+    CALLS.append(tuple(seeds))
+    rows = []
+    for seed in seeds:
+        draw = np.random.default_rng([seed, 1]).standard_normal()
+        rows.append({"seed": seed, "value_m": settings.scale_m * draw / 3.0,
+                     "whole_m": float(seed), "tiny_m": 1e-300 * (seed + 1) / 7,
+                     "count": seed * 2, "flag": bool(seed % 2), "label": f"r{seed}"})
+    return pd.DataFrame(rows)
+
+
+STUDY = RecordStudy("demo", "awkward", awkward_rows, chunk_records=2)
+
+
+def test_normalised_keeps_every_bit_and_dtype():
+    frame = awkward_rows(SPEC.resolve(), range(6))
+    again = normalised(frame)
+    assert list(again.dtypes) == list(frame.dtypes)           # whole floats stay float
+    for column in frame.columns:
+        if frame[column].dtype == float:
+            assert np.array_equal(frame[column].to_numpy().view(np.int64),
+                                  again[column].to_numpy().view(np.int64))
+        else:
+            assert frame[column].tolist() == again[column].tolist()
+
+
+def test_chunking_changes_nothing():
+    settings = SPEC.resolve()
+    one = map_in_process(RecordStudy("demo", "a", awkward_rows, 1), settings, [4, 0, 7, 2])
+    three = map_in_process(RecordStudy("demo", "a", awkward_rows, 3), settings, [4, 0, 7, 2])
+    pd.testing.assert_frame_equal(one, three)
+    assert one.seed.tolist() == [4, 0, 7, 2]                   # the order asked for
+
+
+def test_rows_for_other_seeds_are_refused():
+    bad = RecordStudy("demo", "bad", lambda s, seeds: awkward_rows(s, seeds[::-1]), 2)
+    with pytest.raises(ValueError, match="rows for seeds"):
+        map_in_process(bad, SPEC.resolve(), [0, 1])
+
+
+def test_store_reuses_and_extends(tmp_path):
+    store, settings = EvidenceStore(tmp_path), SPEC.resolve()
+    record_map = stored_map(store, commit="c1")
+    CALLS.clear()
+    first = record_map(STUDY, settings, [0, 1, 2])
+    assert CALLS == [(0, 1), (2,)]
+    CALLS.clear()
+    more = record_map(STUDY, settings, [3, 0, 1, 2])           # only seed 3 is new
+    assert CALLS == [(3,)]
+    pd.testing.assert_frame_equal(more.iloc[1:].reset_index(drop=True), first)
+    assert store.read(STUDY, settings)["commit"].tolist() == ["c1"] * 4
+    fresh = map_in_process(STUDY, settings, [3, 0, 1, 2])
+    pd.testing.assert_frame_equal(more, fresh)                 # stored rows = computed rows
+
+
+def test_key_holds_only_the_fields_that_change_records(tmp_path):
+    store = EvidenceStore(tmp_path)
+    a, b = SPEC.resolve(), SPEC.resolve({"n_records": 50})
+    c = SPEC.resolve({"scale_m": 2.0})
+    assert store.folder(STUDY, a) == store.folder(STUDY, b)
+    assert store.folder(STUDY, a) != store.folder(STUDY, c)
+    assert key_digest({"scale_m": 1.0}) == store.folder(STUDY, a).name
+
+
+def test_rows_of_another_commit_are_spot_checked(tmp_path):
+    store, settings = EvidenceStore(tmp_path), SPEC.resolve()
+    stored_map(store, commit="old")(STUDY, settings, range(10))
+    CALLS.clear()
+    rows = stored_map(store, commit="new")(STUDY, settings, range(10))
+    assert len(CALLS) == 1 and len(CALLS[0]) == 3                  # three rows recomputed
+    checked = CALLS[0]
+    CALLS.clear()
+    stored_map(store, commit="new")(STUDY, settings, range(10))
+    assert CALLS == [checked]                                      # the same three every time
+    assert len(rows) == 10
+    CALLS.clear()
+    stored_map(store, commit="old")(STUDY, settings, range(10))    # its own rows: no check
+    assert CALLS == []
+
+
+def test_a_changed_bit_refuses_the_store(tmp_path):
+    store, settings = EvidenceStore(tmp_path), SPEC.resolve()
+    stored_map(store, commit="old")(STUDY, settings, range(4))
+    path = store.folder(STUDY, settings) / "rows.csv"
+    frame = pd.read_csv(path)
+    frame["value_m"] = np.nextafter(frame["value_m"], np.inf)     # one ulp on every row
+    frame.to_csv(path, index=False, float_format="%.17g")
+    with pytest.raises(EvidenceStoreError, match=r"seed \d's value_m is .* in the rows of commit old"):
+        stored_map(store, commit="new")(STUDY, settings, range(4))
+
+
+def test_an_interrupted_write_keeps_the_finished_rows(tmp_path):
+    store, settings = EvidenceStore(tmp_path), SPEC.resolve()
+    stored_map(store, commit="c1")(STUDY, settings, [0, 1])
+    path = store.folder(STUDY, settings) / "rows.csv"
+    path.write_text(path.read_text() + "2,0.12")                   # cut short by a kill
+    assert store.read(STUDY, settings).seed.tolist() == [0, 1]
+    CALLS.clear()
+    rows = stored_map(store, commit="c1")(STUDY, settings, [0, 1, 2])
+    assert CALLS == [(2,)]
+    assert store.read(STUDY, settings).seed.tolist() == [0, 1, 2]
+    pd.testing.assert_frame_equal(rows, map_in_process(STUDY, settings, [0, 1, 2]))
+
+
+def test_workers_give_the_same_bits(tmp_path):
+    from distributed import Client, LocalCluster
+    settings = SPEC.resolve({"scale_m": 3.0})
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=":0") as cluster, Client(cluster) as client:
+        seen = []
+        on_workers = stored_map(EvidenceStore(tmp_path), client=client, commit="c1")(
+            STUDY, settings, range(7), lambda fraction, message: seen.append(message))
+    pd.testing.assert_frame_equal(on_workers, map_in_process(STUDY, settings, range(7)))
+    assert seen[0] == "awkward: 0/7 records" and seen[-1] == "awkward: 7/7 records"
+
+
+def test_extreme_floats_round_trip():
+    rng = np.random.default_rng(3)
+    values = np.concatenate([rng.standard_normal(20_000) * 10.0 ** rng.integers(-300, 300, 20_000),
+                             [5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, -0.0]])
+    frame = pd.DataFrame({"seed": np.arange(len(values)), "x_m": values})
+    again = normalised(frame)
+    assert np.array_equal(frame.x_m.to_numpy().view(np.int64), again.x_m.to_numpy().view(np.int64))
