@@ -1,0 +1,175 @@
+"""The rulebook's procedures on hand-made evidence: every branch and boundary against a hand
+computation or a closed form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from railpaper import rulebook
+from railpaper.rulebook import (
+    Vocabulary,
+    clopper_pearson,
+    continuous_size,
+    deterministic,
+    design,
+    equivalence,
+    implementation,
+    mid_rank_tail,
+    most_favourable,
+    paired_change,
+    population_rate,
+    rate_size,
+    relative_change,
+    single_run,
+    single_run_size,
+)
+
+
+def test_clopper_pearson_closed_forms():
+    # k = 0: upper = 1 − (α/2)^(1/n); k = n: lower = (α/2)^(1/n)
+    assert clopper_pearson(0, 10) == (0.0, pytest.approx(1 - 0.025 ** 0.1, rel=1e-12))
+    assert clopper_pearson(10, 10) == (pytest.approx(0.025 ** 0.1, rel=1e-12), 1.0)
+    low, high = clopper_pearson(5, 10)
+    assert low == pytest.approx(1 - high, rel=1e-12)          # symmetric at k = n/2
+    with pytest.raises(ValueError, match="0 <= k <= n"):
+        clopper_pearson(11, 10)
+
+
+def test_mid_rank_tail_by_hand():
+    sample = [1.0, 2.0, 3.0, 4.0]
+    assert mid_rank_tail(sample, 2.0) == 0.75                 # F = (1 + ½)/4
+    assert mid_rank_tail(sample, 1.0) == 0.25                 # F = ½/4
+    assert mid_rank_tail(sample, 2.5) == 1.0                  # the median
+    assert mid_rank_tail(sample, 0.0) == 0.0 == mid_rank_tail(sample, 9.0)
+
+
+def test_most_favourable_is_the_clipped_median():
+    sample = [1.0, 2.0, 3.0, 4.0, 5.0]
+    assert most_favourable(sample, 10.0, 4.0) == 8.0          # 10 ± 2, median 3 below
+    assert most_favourable(sample, 4.0, 4.0) == 3.0           # the median is within 4 ± 2
+    assert most_favourable(sample, 0.0, 2.0) == 1.0
+
+
+@pytest.mark.parametrize("n, verdict", [(71, "undecided"), (72, "differs"), (73, "differs")])
+def test_single_run_boundary_at_alpha(n, verdict):
+    # A paper value beyond every record: #{T_r <= 0} = 0 and the upper bound 1 − 0.025^(1/n)
+    # crosses α = 0.05 between n = 71 (0.0506) and n = 72 (0.0499).
+    records = np.arange(n, dtype=float)[:, None]
+    decision = single_run(records, [1e6], [0.0])
+    assert decision.verdict == verdict
+    assert decision.statistic == pytest.approx(1 / (n + 1))
+    assert decision.high == pytest.approx(1 - 0.025 ** (1 / n), rel=1e-12)
+
+
+def test_single_run_plausible_draw_and_resolution():
+    records = np.arange(1.0, 201.0)[:, None]                  # 1..200
+    assert single_run(records, [100.0], [0.0]).verdict == "reproduced"
+    # 260 read to ±70 could have been 190: as typical as about 10 % of the records
+    far = single_run(records, [260.0], [140.0])
+    assert far.verdict == "reproduced"
+    assert single_run(records, [260.0], [0.0]).verdict == "differs"
+
+
+def test_single_run_judges_the_numbers_jointly():
+    # Two numbers, each typical alone (the 15th percentile of its column), are one draw only
+    # if a record shows both: here the columns run in opposite directions, so T_paper is the
+    # smaller tail, 0.3, and 30 % of records are as extreme.
+    n = 100
+    first = np.arange(n, dtype=float)
+    records = np.column_stack([first, first[::-1]])
+    joint = single_run(records, [14.5, 14.5], [0.0, 0.0])
+    assert joint.statistic == pytest.approx((1 + 30) / (n + 1))
+    assert joint.verdict == "reproduced"
+    with pytest.raises(ValueError, match=r"records must be \(n, 2\)"):
+        single_run(first[:, None], [1.0, 2.0], [0.0, 0.0])
+
+
+def test_population_rate_boundaries():
+    # lower bound of 72/72 = 0.025^(1/72) = 0.95006 > 0.95; of 71/71 = 0.94937
+    assert population_rate(72, 72, 0.95).verdict == "reproduced"
+    assert population_rate(71, 71, 0.95).verdict == "undecided"
+    assert population_rate(0, 72, 0.05, direction="at most").verdict == "reproduced"
+    assert population_rate(20, 100, 0.5).verdict == "differs"
+    assert population_rate(52, 100, 0.5).verdict == "undecided"
+    with pytest.raises(ValueError, match="direction"):
+        population_rate(1, 2, 0.5, direction="about")
+
+
+def test_relative_change_by_hand():
+    a, b = [10.0, 12.0, 11.0, 13.0], [13.0, 15.0, 14.0, 16.0]
+    r, low, high = relative_change(a, b)
+    assert r == pytest.approx(3 / 11.5)
+    # u = (3/11.5)(11.5 − A) = (3/11.5)[1.5, −0.5, 0.5, −1.5]; sd = (3/11.5)√(5/3)
+    se = (3 / 11.5) * math.sqrt(5 / 3) / (2 * 11.5)
+    half = 3.182446305284263 * se                             # t(0.975, 3)
+    assert (low, high) == (pytest.approx(r - half), pytest.approx(r + half))
+    with pytest.raises(ValueError, match="mean is 0"):
+        relative_change([1.0, -1.0], [2.0, 2.0])
+
+
+def test_paired_change_every_branch():
+    a = np.array([10.0, 12.0, 11.0, 13.0])
+    assert paired_change(a, a + 3, "increase", 0.1).verdict == "reproduced"   # [0.21, 0.31]
+    assert paired_change(a + 3, a, "decrease", 0.1).verdict == "reproduced"
+    assert paired_change(a, a + 3, "decrease", 0.1).verdict == "differs"      # the opposite
+    assert paired_change(a, a + 0.2, "increase", 0.1).verdict == "differs"    # too small
+    assert paired_change(a, a + [0.0, 2.5, 0.5, 3.0], "increase", 0.1).verdict == "undecided"
+    with pytest.raises(ValueError, match="direction"):
+        paired_change(a, a, "up", 0.1)
+
+
+def test_equivalence_every_branch():
+    close = [0.01, -0.01, 0.02, 0.0, 0.005, -0.004]
+    assert equivalence(close, 0.1).verdict == "reproduced"
+    assert equivalence([0.5, 0.52, 0.49, 0.51], 0.1).verdict == "differs"
+    assert equivalence([0.0, 0.2, -0.1, 0.15], 0.1).verdict == "undecided"
+    a = np.array([10.0, 12.0, 11.0, 13.0])
+    assert equivalence(baseline=a, other=a * 1.01, margin=0.1).verdict == "reproduced"
+    assert equivalence(baseline=a, other=a + 3, margin=0.1).verdict == "differs"
+    # the 90 % interval of the deviations [0.08, 0.09, 0.085, 0.095] lies within ±0.1
+    d = np.array([0.08, 0.09, 0.085, 0.095])
+    half90 = 2.3533634348018264 * d.std(ddof=1) / 2          # t(0.95, 3)
+    decision = equivalence(d, 0.1)
+    assert decision.high == pytest.approx(d.mean() + half90)
+    assert decision.verdict == ("reproduced" if d.mean() + half90 < 0.1 else "undecided")
+
+
+def test_exact_design_implementation():
+    assert deterministic(5, 5).verdict == "reproduced"
+    assert deterministic(20, 5).verdict == "differs"
+    assert deterministic(0.431, 0.43, 0.01).verdict == "reproduced"
+    assert design(True, "poles placed at -30, -40").verdict == "reproduced"
+    assert design(False, "poles placed at -30, -40").verdict == "differs"
+    assert implementation(1200.0, None).verdict == "not testable"
+    assert implementation(1200.0, 1000.0, "sample rate").verdict == "reproduced"
+    assert implementation(800.0, 1000.0).verdict == "differs"
+    assert implementation(None, 1000.0).verdict == "undecided"
+
+
+def test_sizes_from_power_by_hand():
+    z = 1.959963984540054 + 0.8416212335729143             # z(0.975) + z(0.8)
+    assert rate_size(0.5, 0.05) == math.ceil((z * 0.5 / 0.05) ** 2) == 785
+    assert continuous_size(1.0, 0.1) == 785
+    assert rate_size(0.95, 0.05) == math.ceil((z * math.sqrt(0.95 * 0.05) / 0.05) ** 2)
+    assert single_run_size(0.05, 0.025) == math.ceil((z * math.sqrt(0.0475) / 0.025) ** 2) == 597
+    with pytest.raises(ValueError):
+        continuous_size(1.0, 0.0)
+
+
+def test_vocabulary_is_one_map_for_the_book():
+    vocabulary = Vocabulary.load()
+    seen = {}
+    for name, entry in vocabulary.classes.items():
+        assert entry["procedure"] in rulebook.PROCEDURES
+        assert len(entry["justification"].split()) >= 15
+        for word in entry["words"]:
+            assert word not in seen, f"'{word}' is in both {seen[word]} and {name}"
+            seen[word] = name
+    assert vocabulary.entry("absolute")["threshold"] == 0.95
+    assert vocabulary.entry("majority")["threshold"] == 0.5
+    assert vocabulary.entry("trend")["margin"] == vocabulary.entry("similarity")["margin"]
+    with pytest.raises(KeyError, match="no word class 'often'"):
+        vocabulary.entry("often")
