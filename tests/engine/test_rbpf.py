@@ -192,10 +192,10 @@ def test_working_rbpf_agrees_with_exact_posterior():
 def test_experiment_smoke():
     from railpaper.experiments.quasi_gaussian_rbpf import experiment as chapter
 
-    params = chapter.SPEC.resolve(dict(n_particles=30, n_steps=12, grid_size=9, n_monte_carlo=2,
-                                       timing_particles=[10, 20], timing_steps=3), quick=True)
-    a = chapter.run(quick=True, **params)
-    b = chapter.run(quick=True, **params)
+    settings = chapter.SPEC.resolve(dict(n_particles=30, n_steps=12, grid_size=9, n_monte_carlo=2,
+                                         timing_particles=[10, 20], timing_steps=3), quick=True)
+    a = chapter.run(settings)
+    b = chapter.run(settings)
     assert check_metrics(a.metrics) == check_metrics(b.metrics)
     required = ["step", "y1", "y2", "a_est_rbpf", "b_est_rbpf", "a_est_qgrbpf", "b_est_qgrbpf",
                 "a_post_mean", "b_post_mean", "a_post_std", "b_post_std"]
@@ -207,7 +207,7 @@ def test_experiment_smoke():
     assert "time_ratio_qgrbpf_over_rbpf" in a.timings
     assert a.timings["seconds_per_step_qgrbpf_N20"] > 0
     with pytest.raises(chapter.ParameterError):
-        chapter.run(quick=True, **dict(params, a_true=0.9))
+        chapter.run(settings.replace(a_true=0.9))
 
 
 def test_parameters_toml_matches_spec_defaults():

@@ -50,8 +50,7 @@ def test_local_workers_and_cluster_give_identical_metrics(tmp_path, scheduler):
     for metric in METRICS:
         assert local[metric].tolist() == remote[metric].tolist()      # bit-identical floats
     # independent reference: the experiment called directly in this process
-    direct = chapter.run(quick=True, **SPEC.resolve(dict(FIXED, noise_fraction=0.03,
-                                                                 seed=1), True)).metrics
+    direct = chapter.run(SPEC.resolve(dict(FIXED, noise_fraction=0.03, seed=1), True)).metrics
     row = remote[(remote.noise_fraction == 0.03) & (remote.seed == 1)].iloc[0]
     for metric in METRICS:
         assert row[metric] == pytest.approx(direct[metric], rel=1e-9)
@@ -175,21 +174,22 @@ def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
                                  record=2, timing=False, readings_records=0), True)
     frames = []
 
-    def on_workers(p, records, progress):
-        frame = notebook_sweep(qg.SPEC.name, dict(p, n_monte_carlo=1, timing=False, readings_records=0), [p["seed"]],
+    def on_workers(settings, records, progress):
+        sample = settings.replace(n_monte_carlo=1, timing=False, readings_records=0)
+        frame = notebook_sweep(qg.SPEC.name, sample.as_dict(), [settings.seed],
                                tmp_path / "mc", grid={"record": records}, quick=True,
                                require_ok=True, workers=1)
         frames.append(frame)
         return frame.rename(columns={"record": "replicate"})
 
-    in_process = qg.run(quick=True, **small)
-    on_sweep = qg.run(quick=True, monte_carlo=on_workers, **small)
+    in_process = qg.run(small)
+    on_sweep = qg.run(small, monte_carlo=on_workers)
     assert in_process.metrics == on_sweep.metrics
     pd.testing.assert_frame_equal(in_process.monte_carlo, on_sweep.monte_carlo)
     assert on_sweep.monte_carlo.replicate.tolist() == [2, 3, 4]
     assert frames[0].record.tolist() == [3, 4] and (frames[0].status == "ok").all()
-    alone = qg.run(quick=True, **dict(small, record=4, n_monte_carlo=1)).metrics
+    alone = qg.run(small.replace(record=4, n_monte_carlo=1)).metrics
     row = on_sweep.monte_carlo.iloc[2]
     assert all(row[k] == alone[k] for k in row.index if k != "replicate")
     with pytest.raises(ValueError, match="records incomplete"):
-        qg.run(quick=True, monte_carlo=lambda p, r, _: on_workers(p, r[:1], _), **small)
+        qg.run(small, monte_carlo=lambda settings, r, _: on_workers(settings, r[:1], _))

@@ -1,12 +1,13 @@
 """Chapter ``partial-state-observer`` (paper 000, Zheng, Chai, Peng & Li 2016): 10-DOF vertical
 vehicle, LMI functional (partial-state) observer of the wheelset displacements.
 
-``SPEC`` (the chapter's parameters), ``validate(params)`` and ``run(quick=False, progress=None,
-**params)`` are what the pipeline needs; the modules of the package are the chapter's parts
-(``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
+``SPEC`` (the chapter's parameters), ``Settings`` (its typed settings), ``validate(settings)``
+and ``run(settings, progress=None)`` are what the pipeline needs; the modules of the package are
+the chapter's parts (``experiment`` is the whole computation, ``figures`` and ``tables`` draw
+from its result).
 """
 
 from railpaper.experiments.partial_state_observer.experiment import run, validate
-from railpaper.experiments.partial_state_observer.spec import SPEC
+from railpaper.experiments.partial_state_observer.spec import SPEC, Settings
 
-__all__ = ["SPEC", "run", "validate"]
+__all__ = ["SPEC", "Settings", "run", "validate"]

@@ -1,6 +1,6 @@
 """Figures of chapter ``partial-state-observer`` (≤ 7 in wide, legends outside the data).
 
-Each function takes the run's :class:`PartialStateObserverResult` and parameters and returns a
+Each function takes the run's :class:`PartialStateObserverResult` and settings and returns a
 matplotlib figure; the notebook saves it and shows it as a numbered MyST figure.
 """
 
@@ -10,15 +10,16 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from railpaper.experiments.display import legend_below
+from railpaper.experiments.partial_state_observer.spec import Settings
 from railpaper.experiments.partial_state_observer.tables import ESTIMATOR_NAMES
 
 WIDTH_IN = 7.0
 
 
-def shaping_filters(result, params):
+def shaping_filters(result, settings: Settings):
     """FRA class-5 PSD of q at each speed and the fitted second-order shaping filters."""
     fig, ax = plt.subplots(figsize=(WIDTH_IN, 4.2))
-    for speed in sorted(params["speeds_kmh"]):
+    for speed in sorted(settings.speeds_kmh):
         filt, w, S = result.design.filters[speed]
         line, = ax.loglog(w / (2 * np.pi), S * 2 * np.pi, lw=2.5, alpha=0.45,
                           label=f"{speed:g} km/h: FRA class 5")
@@ -30,9 +31,9 @@ def shaping_filters(result, params):
     return fig
 
 
-def displacement(result, params, window_s: float = 0.35):
+def displacement(result, settings: Settings, window_s: float = 0.35):
     """Wheelset 1, true and observed, whole run (left) and the first ``window_s`` (right)."""
-    speeds = sorted(params["speeds_kmh"])
+    speeds = sorted(settings.speeds_kmh)
     fig, axes = plt.subplots(len(speeds), 2, figsize=(WIDTH_IN, 1.7 * len(speeds) + 0.9),
                              sharex="col", squeeze=False, gridspec_kw={"width_ratios": [2, 1]})
     for row, speed in zip(axes, speeds):
@@ -53,9 +54,9 @@ def displacement(result, params, window_s: float = 0.35):
     return fig
 
 
-def convergence(result, params):
+def convergence(result, settings: Settings):
     """|error| (max over wheelsets, log-log) of three estimators, threshold, convergence time."""
-    speeds = sorted(params["speeds_kmh"])
+    speeds = sorted(settings.speeds_kmh)
     fig, axes = plt.subplots(len(speeds), 1, figsize=(WIDTH_IN, 1.8 * len(speeds) + 1.0),
                              sharex=True, squeeze=False)
     for ax, speed in zip(axes[:, 0], speeds):
@@ -64,7 +65,7 @@ def convergence(result, params):
         for name, style in (("paper", "-"), ("hb0", "--"), ("kalman", ":")):
             err = np.abs(getattr(est, f"{name}_m") - rec.z_m).max(axis=1)[1:]
             ax.loglog(t, err * 1e3, style, lw=1.0, label=ESTIMATOR_NAMES[name])
-        thr = params["convergence_fraction"] * np.sqrt(np.mean(rec.z_m**2, axis=0)).min()
+        thr = settings.convergence_fraction * np.sqrt(np.mean(rec.z_m**2, axis=0)).min()
         ax.axhline(thr * 1e3, color="grey", lw=0.8, label="threshold: 5 % of RMS($z_w$)")
         tc = result.metrics[f"convergence_time_s_{speed:g}kmh"]
         if tc > 0:
@@ -76,10 +77,10 @@ def convergence(result, params):
     return fig
 
 
-def max_error_vs_speed(result, params):
+def max_error_vs_speed(result, settings: Settings):
     """Max error after 1 s against speed: one record (line) and 5-95 % over seeds (band)."""
-    m, speeds = result.metrics, sorted(params["speeds_kmh"])
-    own = result.monte_carlo[result.monte_carlo.reading == params["suspension_reading"]]
+    m, speeds = result.metrics, sorted(settings.speeds_kmh)
+    own = result.monte_carlo[result.monte_carlo.reading == settings.suspension_reading]
     fig, ax = plt.subplots(figsize=(WIDTH_IN, 4.6))
     markers = {"paper": "o", "hb0": "s", "kalman": "^", "q": "D"}
     for name, suf in (("paper", ""), ("hb0", "_hb0"), ("kalman", "_kalman"), ("q", "_q")):
@@ -102,7 +103,7 @@ def max_error_vs_speed(result, params):
     return fig
 
 
-def speed_trends(result, params):
+def speed_trends(result, settings: Settings):
     """Monte Carlo medians (25-75 % band) against speed, both readings (columns)."""
     mc = result.monte_carlo
     panels = [("convergence_time_s", "convergence_time_fixed_s", "convergence\ntime (s)", 1),
@@ -134,10 +135,10 @@ def speed_trends(result, params):
     return fig
 
 
-def convergence_vs_alpha(result, params):
+def convergence_vs_alpha(result, settings: Settings):
     """Convergence time of one record against the slowest designed decay rate."""
     sw, m = result.alpha_sweep, result.metrics
-    speeds = sorted(params["speeds_kmh"])
+    speeds = sorted(settings.speeds_kmh)
     fig, ax = plt.subplots(figsize=(WIDTH_IN, 4.8))
     for speed in speeds:
         s = sw[(sw.speed_kmh == speed) & sw.noisy]
@@ -157,9 +158,9 @@ def convergence_vs_alpha(result, params):
     return fig
 
 
-def noise_free_error(result, params):
+def noise_free_error(result, settings: Settings):
     """Noise-free error (max over wheelsets) at the highest speed: ZOH, FOH, Kalman, ẑ = q."""
-    speed = max(params["speeds_kmh"])
+    speed = max(settings.speeds_kmh)
     rec, est = result.records[speed], result.noise_free[speed]
     fig, ax = plt.subplots(figsize=(WIDTH_IN, 4.0))
     for field_name, label in (("paper_m", "paper's observer, zero-order hold"),

@@ -1,5 +1,5 @@
 """Chapter ``partial-state-observer``'s parameters (``SPEC``): their defaults, quick sizes, units
-and meaning."""
+and meaning; ``Settings``, the chapter's typed settings made from them."""
 
 from __future__ import annotations
 
@@ -30,10 +30,11 @@ SPEC = ChapterSpec(
         Parameter("suspension_reading", "labels", "str",
                   "reading of Table 1's suspension rows for the illustrations: 'labels' (its "
                   "words: primary 2.14e6 N/m, 4.9e4 N·s/m) or 'symbols' (its symbols: primary "
-                  "K_p = 2.535e6 N/m, C_p = 1.96e5 N·s/m); the evidence covers both"),
+                  "K_p = 2.535e6 N/m, C_p = 1.96e5 N·s/m); the evidence covers both",
+                  changes_records=False),
         Parameter("alpha_sweep_per_s", [5.0, 10.0, 20.0, 40.0, 80.0, 160.0], "list[float]",
                   "values of α for the convergence-time sweep, 1/s",
-                  quick=[10.0, 40.0, 160.0], positive=True),
+                  quick=[10.0, 40.0, 160.0], positive=True, changes_records=False),
         Parameter("initial_error_m", 0.005, "float",
                   "initial error of every wheelset-displacement estimate, m"),
         Parameter("convergence_fraction", 0.05, "float",
@@ -47,8 +48,9 @@ SPEC = ChapterSpec(
         Parameter("wavelength_max_m", 304.8, "float", "longest wavelength of the profile, m",
                   positive=True),
         Parameter("n_seeds", 80, "int", "Monte Carlo seeds (seed, seed+1, …), each at every "
-                  "speed under both readings", quick=30, minimum=2),
+                  "speed under both readings", quick=30, minimum=2, changes_records=False),
         Parameter("seed", 0, "int", "seed of the default run (track profile and sensor noise)",
-                  minimum=0),
+                  minimum=0, changes_records=False),
     ],
 )
+Settings = SPEC.settings_type

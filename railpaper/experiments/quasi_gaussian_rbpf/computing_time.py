@@ -34,6 +34,7 @@ import pandas as pd
 from railpaper.engine.kalman_bank import multiply_adds
 from railpaper.engine.particles import systematic_resample
 from railpaper.engine.rbpf import run_filter
+from railpaper.experiments.quasi_gaussian_rbpf.spec import Settings
 from railpaper.stats import median_interval
 from railpaper.threads import one_thread
 from railpaper.timing import interleaved
@@ -137,11 +138,11 @@ def median_step_seconds(make_filter: Callable, name: str, n: int, y: np.ndarray,
     return float(np.median(seconds))
 
 
-def paired_samples(p: dict, make_filter: Callable, y: np.ndarray) -> pd.DataFrame:
+def paired_samples(settings: Settings, make_filter: Callable, y: np.ndarray) -> pd.DataFrame:
     """One row per paired repeat: median seconds per step of each :data:`PAIRED` filter and
     of one resampling, at ``timing_ratio_particles``, measured back to back."""
-    n, repeats = p["timing_ratio_particles"], p["timing_ratio_repeats"]
-    rng = np.random.default_rng([p["seed"], 20_000])
+    n, repeats = settings.timing_ratio_particles, settings.timing_ratio_repeats
+    rng = np.random.default_rng([settings.seed, 20_000])
 
     def timed(name: str) -> Callable[[], float]:
         index = iter(range(repeats))                  # repeat r: particles and stream 20000 + r
@@ -165,21 +166,21 @@ def paired_metrics(samples: pd.DataFrame) -> dict:
     return m
 
 
-def timing(p: dict, make_filter: Callable, filters: tuple[str, ...], y: np.ndarray,
+def timing(settings: Settings, make_filter: Callable, filters: tuple[str, ...], y: np.ndarray,
            progress) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """Curves and paired repeats (module docstring), on one numba thread."""
     with one_thread():
-        return _timing(p, make_filter, filters, y, progress)
+        return _timing(settings, make_filter, filters, y, progress)
 
 
-def _timing(p: dict, make_filter: Callable, filters: tuple[str, ...], y: np.ndarray,
+def _timing(settings: Settings, make_filter: Callable, filters: tuple[str, ...], y: np.ndarray,
             progress) -> tuple[dict, pd.DataFrame, pd.DataFrame]:
     """Curves and paired repeats (module docstring).
 
     Parameters
     ----------
-    p : dict
-        Resolved chapter parameters.
+    settings : Settings
+        The chapter's settings.
     make_filter : callable
         ``make_filter(name, n, repeat)`` → a fresh filter.
     filters : tuple of str
@@ -200,16 +201,17 @@ def _timing(p: dict, make_filter: Callable, filters: tuple[str, ...], y: np.ndar
     samples : DataFrame
         :func:`paired_samples`.
     """
-    counts = sorted(set(int(n) for n in p["timing_particles"] if n >= 2) | {p["n_particles"]})
-    y = y[: p["timing_steps"]]
+    counts = sorted(set(int(n) for n in settings.timing_particles if n >= 2)
+                    | {settings.n_particles})
+    y = y[: settings.timing_steps]
     rows = []
-    rng = np.random.default_rng([p["seed"], 10_000])
+    rng = np.random.default_rng([settings.seed, 10_000])
     timings = {}
     for i, n in enumerate(counts):
         progress(0.9 + 0.08 * i / len(counts), f"timing N={n}")
         best = {name: np.inf for name in filters}
         best_resampling = np.inf
-        for r in range(p["timing_repeats"]):
+        for r in range(settings.timing_repeats):
             for name in filters:                        # interleaved: same machine load
                 best[name] = min(best[name], seconds_per_step(make_filter, name, n, y, 10_000 + r))
             best_resampling = min(best_resampling, resampling_seconds(n, rng))
@@ -222,10 +224,10 @@ def _timing(p: dict, make_filter: Callable, filters: tuple[str, ...], y: np.ndar
     for n in per.index:
         timings[f"time_ratio_qgrbpf_over_rbpf_N{n}"] = per.loc[n, "qgrbpf"] / per.loc[n, "rbpf"]
     timings["time_ratio_qgrbpf_over_rbpf"] = timings[
-        f"time_ratio_qgrbpf_over_rbpf_N{p['n_particles']}"]
+        f"time_ratio_qgrbpf_over_rbpf_N{settings.n_particles}"]
     timings["time_saving_qgrbpf_vs_rbpf_percent"] = 100.0 * (
         1.0 - timings["time_ratio_qgrbpf_over_rbpf"])
-    progress(0.98, f"paired timing N={p['timing_ratio_particles']}")
-    samples = paired_samples(p, make_filter, y)
+    progress(0.98, f"paired timing N={settings.timing_ratio_particles}")
+    samples = paired_samples(settings, make_filter, y)
     timings.update(paired_metrics(samples))
     return timings, curves, samples

@@ -58,6 +58,8 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     PARAMS,
     QGRBPF_READINGS,
     SPEC,
+    Settings,
+    true_values,
 )
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
 from railpaper.settling import first_step, settling_step
@@ -66,65 +68,66 @@ from railpaper.threads import one_thread
 EQ10_READINGS = ("ratio", "printed")
 
 
-def validate(p: dict) -> None:
-    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
-    if not p["a_min"] < p["a_true"] < p["a_max"]:
-        raise ParameterError(f"a_true={p['a_true']} must lie inside the prior box "
-                             f"({p['a_min']}, {p['a_max']})")
-    if not p["b_min"] < p["b_true"] < p["b_max"]:
-        raise ParameterError(f"b_true={p['b_true']} must lie inside the prior box "
-                             f"({p['b_min']}, {p['b_max']})")
-    if not 1.0 / 3.0 < p["liu_west_delta"] <= 1.0:
-        raise ParameterError(f"liu_west_delta must be in (1/3, 1], got {p['liu_west_delta']}")
-    if not p["ess_fraction"] <= 1.0:
-        raise ParameterError(f"ess_fraction must be in (0, 1], got {p['ess_fraction']}")
-    if not p["weight_threshold"] < 1.0:
+def validate(settings: Settings) -> None:
+    """Refuse non-physical or inconsistent settings with one line, before any work."""
+    if not settings.a_min < settings.a_true < settings.a_max:
+        raise ParameterError(f"a_true={settings.a_true} must lie inside the prior box "
+                             f"({settings.a_min}, {settings.a_max})")
+    if not settings.b_min < settings.b_true < settings.b_max:
+        raise ParameterError(f"b_true={settings.b_true} must lie inside the prior box "
+                             f"({settings.b_min}, {settings.b_max})")
+    if not 1.0 / 3.0 < settings.liu_west_delta <= 1.0:
+        raise ParameterError(f"liu_west_delta must be in (1/3, 1], got {settings.liu_west_delta}")
+    if not settings.ess_fraction <= 1.0:
+        raise ParameterError(f"ess_fraction must be in (0, 1], got {settings.ess_fraction}")
+    if not settings.weight_threshold < 1.0:
         raise ParameterError(f"weight_threshold must be < 1 (a fraction of 1/N), "
-                             f"got {p['weight_threshold']}")
-    if p["eq10_reading"] not in EQ10_READINGS:
+                             f"got {settings.weight_threshold}")
+    if settings.eq10_reading not in EQ10_READINGS:
         raise ParameterError(f"eq10_reading must be one of {', '.join(EQ10_READINGS)}, "
-                             f"got {p['eq10_reading']!r}")
-    if max(p["timing_particles"]) < 2:
+                             f"got {settings.eq10_reading!r}")
+    if max(settings.timing_particles) < 2:
         raise ParameterError("timing_particles needs at least one count >= 2")
-    check_banks([("n_particles", p["n_particles"], p["n_particles"], 2, 6, "the RBPF and Q-GRBPFs"),
-                 ("timing_particles", p["timing_particles"],
-                  max(p["timing_particles"]) * p["timing"], 2, 6, "the timed filters"),
-                 ("timing_ratio_particles", p["timing_ratio_particles"],
-                  p["timing_ratio_particles"] * p["timing"], 2, 6, "the timed filters"),
-                 ("grid_size", p["grid_size"], p["grid_size"] ** 2, 2, 6 + p["n_steps"],
-                  "the exact posterior's grid of Kalman filters")])
+    check_banks([("n_particles", settings.n_particles, settings.n_particles, 2, 6,
+                  "the RBPF and Q-GRBPFs"),
+                 ("timing_particles", list(settings.timing_particles),
+                  max(settings.timing_particles) * settings.timing, 2, 6, "the timed filters"),
+                 ("timing_ratio_particles", settings.timing_ratio_particles,
+                  settings.timing_ratio_particles * settings.timing, 2, 6, "the timed filters"),
+                 ("grid_size", settings.grid_size, settings.grid_size ** 2, 2,
+                  6 + settings.n_steps, "the exact posterior's grid of Kalman filters")])
 
 
-def prior_box(p: dict) -> tuple[np.ndarray, np.ndarray]:
+def prior_box(settings: Settings) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper corners ``(a_min, b_min)``, ``(a_max, b_max)`` of the uniform prior (1)."""
-    return np.array([p["a_min"], p["b_min"]]), np.array([p["a_max"], p["b_max"]])
+    return np.array([settings.a_min, settings.b_min]), np.array([settings.a_max, settings.b_max])
 
 
-def initial_state(p: dict) -> tuple[np.ndarray, np.ndarray]:
+def initial_state(settings: Settings) -> tuple[np.ndarray, np.ndarray]:
     """Initial mean ``x0 = 0`` and covariance ``P0 = p0_std² I`` of every particle's Kalman
     filter (and of the exact posterior's)."""
-    return np.zeros(2), p["p0_std"] ** 2 * np.eye(2)
+    return np.zeros(2), settings.p0_std ** 2 * np.eye(2)
 
 
-def prior_particles(p: dict, rng: np.random.Generator) -> np.ndarray:
+def prior_particles(settings: Settings, rng: np.random.Generator) -> np.ndarray:
     """``n_particles`` initial parameter particles (N, 2), uniform on :func:`prior_box`."""
-    lower, upper = prior_box(p)
-    return lower + (upper - lower) * rng.random((p["n_particles"], 2))
+    lower, upper = prior_box(settings)
+    return lower + (upper - lower) * rng.random((settings.n_particles, 2))
 
 
-def make_filter(name: str, p: dict, system, theta0, rng):
+def make_filter(name: str, settings: Settings, system, theta0, rng):
     """Filter ``name`` (one of FILTERS, or a Q-GRBPF name + NO_THRESHOLD)."""
-    x0, P0 = initial_state(p)
+    x0, P0 = initial_state(settings)
     if name == "rbpf":
         return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="paper",
-                                  delta=p["liu_west_delta"])
+                                  delta=settings.liu_west_delta)
     if name == "rbpf_working":
         return RaoBlackwellisedPF(system, theta0, x0, P0, rng, scheme="working",
-                                  delta=p["liu_west_delta"], ess_fraction=p["ess_fraction"],
-                                  tempering_steps=p["tempering_steps"])
+                                  delta=settings.liu_west_delta, ess_fraction=settings.ess_fraction,
+                                  tempering_steps=settings.tempering_steps)
     base = name.removesuffix(NO_THRESHOLD)
     weighting = "printed" if base == "qgrbpf_printed" else "ratio"
-    threshold = 0.0 if name.endswith(NO_THRESHOLD) else p["weight_threshold"]
+    threshold = 0.0 if name.endswith(NO_THRESHOLD) else settings.weight_threshold
     return QuasiGaussianRBPF(system, theta0, x0, P0, rng, weighting=weighting,
                              weight_threshold=threshold)
 
@@ -137,31 +140,32 @@ def streams(seed: int, replicate: int) -> dict[str, np.random.Generator]:
     return {n: np.random.default_rng(c) for n, c in zip(names, children)}
 
 
-def replicate(p: dict, index: int) -> OneRecord:
+def replicate(settings: Settings, index: int) -> OneRecord:
     """Simulate record ``index``, run the four filters, the two Q-GRBPFs without threshold (on
     the same random streams as with it) and the exact posterior on it."""
-    gen = streams(p["seed"], index)
-    system = paper004_system(p["q_var"], p["r_var"])
-    sim = simulate_paper004(p["a_true"], p["b_true"], p["q_var"], p["r_var"], p["p0_std"],
-                            p["n_steps"], gen["data"])
-    lower, upper = prior_box(p)
-    theta0 = prior_particles(p, gen["prior"])
-    exact = grid_posterior(system, sim.y, lower, upper, p["grid_size"], *initial_state(p))
-    runs = {name: run_filter(make_filter(name, p, system, theta0, gen[name]), sim.y)
+    gen = streams(settings.seed, index)
+    system = paper004_system(settings.q_var, settings.r_var)
+    sim = simulate_paper004(settings.a_true, settings.b_true, settings.q_var, settings.r_var,
+                            settings.p0_std, settings.n_steps, gen["data"])
+    lower, upper = prior_box(settings)
+    theta0 = prior_particles(settings, gen["prior"])
+    exact = grid_posterior(system, sim.y, lower, upper, settings.grid_size,
+                           *initial_state(settings))
+    runs = {name: run_filter(make_filter(name, settings, system, theta0, gen[name]), sim.y)
             for name in FILTERS}
-    off = {q + NO_THRESHOLD: run_filter(make_filter(q + NO_THRESHOLD, p, system, theta0,
-                                                    streams(p["seed"], index)[q]), sim.y)
+    off = {q + NO_THRESHOLD: run_filter(make_filter(q + NO_THRESHOLD, settings, system, theta0,
+                                                    streams(settings.seed, index)[q]), sim.y)
            for q in QGRBPF_READINGS}
     return OneRecord(index=index, states=sim.x, measurements=sim.y, exact=exact, runs=runs,
                      runs_without_threshold=off)
 
 
-def record_metrics(p: dict, rep: OneRecord) -> dict:
+def record_metrics(settings: Settings, rep: OneRecord) -> dict:
     """Per-record metrics (all filters, both parameters; final error and z of the Q-GRBPFs
     without threshold)."""
-    exact, truth = rep.exact, (p["a_true"], p["b_true"])
-    tol = p["tolerance_to_truth"]
-    short = min(p["short_horizon"], p["n_steps"]) - 1  # index of that step (or the last)
+    exact, truth = rep.exact, (settings.a_true, settings.b_true)
+    tol = settings.tolerance_to_truth
+    short = min(settings.short_horizon, settings.n_steps) - 1  # index of that step (or the last)
     m = {}
     for j, par in enumerate(PARAMS):
         mean, std = exact.mean[:, j], exact.std[:, j]
@@ -170,7 +174,7 @@ def record_metrics(p: dict, rep: OneRecord) -> dict:
         m[f"final_std_{par}_posterior"] = std[-1]
         m[f"first_within_{par}_posterior"] = first_step(np.abs(mean - truth[j]) <= tol)
         m[f"settling_step_{par}_posterior"] = settling_step(np.abs(mean - mean[-1]) <= tol)
-        below = np.flatnonzero(std <= p["tolerance_to_truth"])
+        below = np.flatnonzero(std <= settings.tolerance_to_truth)
         m[f"posterior_std_below_tolerance_step_{par}"] = int(below[0]) + 1 if below.size else -1
         for name, run in rep.runs.items():
             est = run.theta_mean[:, j]
@@ -192,7 +196,7 @@ def record_metrics(p: dict, rep: OneRecord) -> dict:
     return m
 
 
-def _timeseries(p: dict, rep: OneRecord) -> pd.DataFrame:
+def _timeseries(rep: OneRecord) -> pd.DataFrame:
     exact, runs = rep.exact, rep.runs
     cols = {"step": rep.steps, "y1": rep.measurements[:, 0], "y2": rep.measurements[:, 1]}
     for name in ("rbpf", "qgrbpf"):
@@ -210,44 +214,44 @@ def _timeseries(p: dict, rep: OneRecord) -> pd.DataFrame:
     return pd.DataFrame(cols)
 
 
-def _timing(p: dict, y: np.ndarray, progress):
+def _timing(settings: Settings, y: np.ndarray, progress):
     """Computing times on the main record (:func:`~railpaper.experiments.quasi_gaussian_rbpf.computing_time.timing`)."""
-    system = paper004_system(p["q_var"], p["r_var"])
+    system = paper004_system(settings.q_var, settings.r_var)
 
     def fresh_filter(name: str, n: int, repeat: int):
-        gen = streams(p["seed"], repeat)
-        return make_filter(name, p, system, prior_particles(dict(p, n_particles=n), gen["prior"]),
+        gen = streams(settings.seed, repeat)
+        return make_filter(name, settings, system,
+                           prior_particles(settings.replace(n_particles=n), gen["prior"]),
                            gen[name])
 
-    return timing(p, fresh_filter, FILTERS, y, progress)
+    return timing(settings, fresh_filter, FILTERS, y, progress)
 
 
-def records_in_process(p: dict, records: list[int], progress=no_progress) -> pd.DataFrame:
+def records_in_process(settings: Settings, records: list[int],
+                       progress=no_progress) -> pd.DataFrame:
     """Per-record metrics (column ``replicate`` = record index) of ``records``, one by one."""
     rows = []
     for i, index in enumerate(records):
         progress(0.9 * (i + 1) / (len(records) + 1), f"Monte Carlo record {i + 1}/{len(records)}")
-        rows.append(dict(replicate=index, **record_metrics(p, replicate(p, index))))
+        rows.append(dict(replicate=index, **record_metrics(settings, replicate(settings, index))))
     return pd.DataFrame(rows)
 
 
-def run(*, quick: bool = False, progress=None, monte_carlo=None,
-        **params) -> QuasiGaussianRBPFResult:
+def run(settings: Settings, *, progress=None, monte_carlo=None) -> QuasiGaussianRBPFResult:
     """Run the chapter: main record, Monte Carlo over records, computing times.
 
     Parameters
     ----------
-    quick : bool
-        The chapter's quick sizes for parameters not given.
+    settings : Settings
+        The chapter's settings (:data:`SPEC`; ``SPEC.resolve(overrides, quick)``); checked by
+        :func:`validate` first.
     progress : callable, optional
         ``progress(fraction, message)``.
     monte_carlo : callable, optional
-        ``monte_carlo(p, records, progress)`` → DataFrame with a ``replicate`` column (the record
-        index) and the per-record metrics of ``records`` (all but the main record), e.g. a sweep
-        of this function with ``n_monte_carlo = 1``, ``timing = False`` and ``record`` as the grid.
-        Default: :func:`records_in_process`.
-    **params
-        Chapter parameters (:data:`SPEC`).
+        ``monte_carlo(settings, records, progress)`` → DataFrame with a ``replicate`` column (the
+        record index) and the per-record metrics of ``records`` (all but the main record), e.g. a
+        sweep of this function with ``n_monte_carlo = 1``, ``timing = False`` and ``record`` as
+        the grid.  Default: :func:`records_in_process`.
 
     Returns
     -------
@@ -262,21 +266,20 @@ def run(*, quick: bool = False, progress=None, monte_carlo=None,
     Carlo records run on sweep workers, one thread each, anyway.
     """
     progress = progress or default_progress()
-    p = SPEC.resolve(params, quick)        # idempotent on resolved parameters; fills gaps
-    validate(p)
+    validate(settings)
     with one_thread():
-        return _run(p, progress, monte_carlo)
+        return _run(settings, progress, monte_carlo)
 
 
-def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
-    """:func:`run` on resolved, validated parameters, on one numba thread."""
+def _run(settings: Settings, progress, monte_carlo) -> QuasiGaussianRBPFResult:
+    """:func:`run` on validated settings, on one numba thread."""
     start = time.perf_counter()
-    main = replicate(p, p["record"])
-    first = dict(replicate=p["record"], **record_metrics(p, main))
-    records = list(range(p["record"] + 1, p["record"] + p["n_monte_carlo"]))
+    main = replicate(settings, settings.record)
+    first = dict(replicate=settings.record, **record_metrics(settings, main))
+    records = list(range(settings.record + 1, settings.record + settings.n_monte_carlo))
     mc_table = pd.DataFrame([first])
     if records:
-        others = (monte_carlo or records_in_process)(p, records, progress)
+        others = (monte_carlo or records_in_process)(settings, records, progress)
         missing = sorted(set(first) - set(others.columns))
         if missing or sorted(others["replicate"]) != records:
             raise ValueError(f"Monte Carlo records incomplete: expected records {records[0]}-"
@@ -285,28 +288,30 @@ def _run(p: dict, progress, monte_carlo) -> QuasiGaussianRBPFResult:
         mc_table = pd.concat([mc_table, others], ignore_index=True)
     mc_seconds = time.perf_counter() - start
     metrics = {k: v for k, v in first.items() if k != "replicate"}
-    metrics.update(descriptive_metrics(mc_table, p["n_steps"]))
-    metrics.update(evidence_metrics(mc_table, {"a": p["a_true"], "b": p["b_true"]}))
+    metrics.update(descriptive_metrics(mc_table, settings.n_steps))
+    metrics.update(evidence_metrics(mc_table, true_values(settings)))
     metrics["grid_min_std_over_spacing"] = main.exact.min_std_over_spacing
     metrics["grid_edge_mass"] = main.exact.edge_mass
-    model = paper004_system(p["q_var"], p["r_var"])(np.zeros((1, 2)))
+    model = paper004_system(settings.q_var, settings.r_var)(np.zeros((1, 2)))
     (n_state, _), (n_meas, _) = model.F.shape[-2:], model.H.shape[-2:]
-    metrics.update(operation_metrics(p["timing_ratio_particles"], n=n_state, p=n_meas, d=2))
-    timings, timing_table, timing_samples = (_timing(p, main.measurements, progress)
-                                             if p["timing"] else ({}, None, None))
+    metrics.update(operation_metrics(settings.timing_ratio_particles, n=n_state, p=n_meas, d=2))
+    timings, timing_table, timing_samples = (_timing(settings, main.measurements, progress)
+                                             if settings.timing else ({}, None, None))
     timings["monte_carlo_seconds"] = mc_seconds
     readings = None
-    if p["readings_records"] > 0:
+    if settings.readings_records > 0:
         start = time.perf_counter()
-        readings = run_readings(truth=(p["a_true"], p["b_true"]), lower=(p["a_min"], p["b_min"]),
-                                upper=(p["a_max"], p["b_max"]), n_records=p["readings_records"],
-                                grid_size=p["grid_size"], tolerance=p["tolerance_to_truth"],
-                                seed=p["seed"], progress=lambda m: progress(0.97, m))
+        readings = run_readings(truth=(settings.a_true, settings.b_true),
+                                lower=(settings.a_min, settings.b_min),
+                                upper=(settings.a_max, settings.b_max),
+                                n_records=settings.readings_records,
+                                grid_size=settings.grid_size, tolerance=settings.tolerance_to_truth,
+                                seed=settings.seed, progress=lambda m: progress(0.97, m))
         metrics.update(readings.metrics())
         timings["readings_seconds"] = time.perf_counter() - start
     progress(1.0, "done")
     return QuasiGaussianRBPFResult(
-        metrics=metrics, timings=timings, timeseries=_timeseries(p, main),
+        metrics=metrics, timings=timings, timeseries=_timeseries(main),
         extra_tables=dict({"monte_carlo": mc_table},
                           **({} if readings is None else {"readings": readings.table}),
                           **({} if timing_samples is None else {"timing_samples": timing_samples})),

@@ -1,8 +1,8 @@
 """Figures of chapter ``quasi-gaussian-rbpf`` (7 in wide, legends outside the data, display names).
 
 Each function takes the run's
-:class:`~railpaper.experiments.quasi_gaussian_rbpf.result.QuasiGaussianRBPFResult` and resolved
-parameters and returns a matplotlib figure; the notebook saves it and shows it as a numbered MyST
+:class:`~railpaper.experiments.quasi_gaussian_rbpf.result.QuasiGaussianRBPFResult` and its
+settings and returns a matplotlib figure; the notebook saves it and shows it as a numbered MyST
 figure.  The parameters ``a``, ``b`` and their errors are dimensionless.
 """
 
@@ -19,6 +19,8 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     PAPER_STEPS,
     PARAMS,
     STYLES,
+    Settings,
+    true_values,
 )
 
 WIDTH_IN = 7.0
@@ -30,10 +32,10 @@ WINDOW_STEPS = 80
 PAPER_COLOR = "C4"
 
 
-def line_widths(params) -> dict[str, float]:
+def line_widths(settings: Settings) -> dict[str, float]:
     """Line width per filter: the Q-GRBPF of the other reading of Eq. (10) than
     ``eq10_reading`` is drawn thin."""
-    thin = "qgrbpf_printed" if params["eq10_reading"] == "ratio" else "qgrbpf"
+    thin = "qgrbpf_printed" if settings.eq10_reading == "ratio" else "qgrbpf"
     return {name: 0.8 if name == thin else 1.3 for name in STYLES}
 
 
@@ -44,10 +46,10 @@ def _paper_steps(ax, par: str) -> None:
         ax.axvline(PAPER_STEPS[(par, name)], color=PAPER_COLOR, ls=ls, lw=1.0, label=labels[name])
 
 
-def estimates(result, params):
+def estimates(result, settings: Settings):
     """Estimates of a and b on the main record with the exact posterior (paper Figs 1–2): the
     first :data:`WINDOW_STEPS` steps (left) and the whole record (right)."""
-    rec, widths = result.main, line_widths(params)
+    rec, widths = result.main, line_widths(settings)
     steps = rec.steps
     fig, axes = plt.subplots(2, 2, figsize=(WIDTH_IN, 6.6), sharey="row",
                              gridspec_kw={"width_ratios": [1, 1.35]})
@@ -61,7 +63,7 @@ def estimates(result, params):
             for name, (color, ls) in STYLES.items():
                 ax.plot(steps[k], rec.runs[name].theta_mean[k, j], color=color, ls=ls,
                         lw=widths[name], label=NAMES[name])
-            ax.axhline(params[f"{par}_true"], color="k", ls=":", lw=1, label="true value")
+            ax.axhline(true_values(settings)[par], color="k", ls=":", lw=1, label="true value")
         _paper_steps(row[0], par)
         row[0].set(ylabel=f"estimate of {par} (1)",
                    title=f"{par}: first {min(WINDOW_STEPS, len(steps))} steps")
@@ -73,14 +75,14 @@ def estimates(result, params):
     return fig
 
 
-def errors(result, params):
+def errors(result, settings: Settings):
     """Estimation errors on the main record (paper Figs 3–4), symlog, with the exact
     posterior's ±2 std band and the paper's final errors over the horizons they can be from."""
-    rec, widths = result.main, line_widths(params)
-    steps, short = rec.steps, min(params["short_horizon"], len(rec.steps))
+    rec, widths = result.main, line_widths(settings)
+    steps, short = rec.steps, min(settings.short_horizon, len(rec.steps))
     fig, axes = plt.subplots(2, 1, figsize=(WIDTH_IN, 6.4), sharex=True)
     for ax, j, par in zip(axes, range(2), PARAMS):
-        truth = params[f"{par}_true"]
+        truth = true_values(settings)[par]
         err, std = rec.exact.mean[:, j] - truth, rec.exact.std[:, j]
         ax.fill_between(steps, err - 2 * std, err + 2 * std, color="0.82",
                         label="exact posterior mean ± 2 std")
@@ -105,10 +107,10 @@ def errors(result, params):
     return fig
 
 
-def spread_ratio(result, params):
+def spread_ratio(result, settings: Settings):
     """Each filter's parameter std over the exact posterior's, main record: every filter on a
     log scale (left) and a linear close-up around 1 (right)."""
-    rec, widths = result.main, line_widths(params)
+    rec, widths = result.main, line_widths(settings)
     fig, axes = plt.subplots(2, 2, figsize=(WIDTH_IN, 5.6), sharex=True)
     for row, j, par in zip(axes, range(2), PARAMS):
         for name, (color, ls) in STYLES.items():
@@ -128,7 +130,7 @@ def spread_ratio(result, params):
     return fig
 
 
-def monte_carlo_errors(result, params):
+def monte_carlo_errors(result, settings: Settings):
     """Over the Monte Carlo records: final errors (left) and final distances from the exact
     posterior mean in posterior std (right, log), horizontal boxes per filter."""
     mc = result.monte_carlo
@@ -149,10 +151,10 @@ def monte_carlo_errors(result, params):
     return fig
 
 
-def settling(result, params):
+def settling(result, settings: Settings):
     """Distribution over records of the settling step of every filter and of the exact
     posterior mean (log axis), with the paper's steps."""
-    mc, tol = result.monte_carlo, params["tolerance_to_truth"]
+    mc, tol = result.monte_carlo, settings.tolerance_to_truth
     fig, axes = plt.subplots(2, 1, figsize=(WIDTH_IN, 5.8), sharex=True)
     for ax, par in zip(axes, PARAMS):
         for name in ["posterior"] + list(STYLES):
@@ -170,7 +172,7 @@ def settling(result, params):
     return fig
 
 
-def computing_time(result, params):
+def computing_time(result, settings: Settings):
     """Seconds per step against N (left) and the paired ratios at the paper's N (right)."""
     curves, pairs = result.computing_time.curves_s_per_step, result.computing_time.paired_s_per_step
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(WIDTH_IN, 3.9),
@@ -192,7 +194,7 @@ def computing_time(result, params):
     bx.set_xticks(range(1, 4), list(ratios))
     bx.axhline(0.44, color=PAPER_COLOR, ls="--", lw=1, label="paper: 56 % less (ratio 0.44)")
     bx.set(ylabel="time / time of one RBPF step", ylim=(0, None),
-           title=f"{len(pairs)} paired repeats, N = {params['timing_ratio_particles']}")
+           title=f"{len(pairs)} paired repeats, N = {settings.timing_ratio_particles}")
     handles = ax.get_legend_handles_labels()
     extra = bx.get_legend_handles_labels()
     fig.tight_layout(rect=(0, 0.17, 1, 1))

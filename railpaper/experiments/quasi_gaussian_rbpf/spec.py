@@ -1,5 +1,6 @@
-"""Chapter ``quasi-gaussian-rbpf``'s parameters (``SPEC``) and its vocabulary: the two
-parameters, the filters compared and their display names and colours."""
+"""Chapter ``quasi-gaussian-rbpf``'s parameters (``SPEC``), its typed settings (``Settings``)
+and its vocabulary: the two parameters, the filters compared and their display names and
+colours."""
 
 from __future__ import annotations
 
@@ -39,26 +40,29 @@ SPEC = ChapterSpec(
         P("weight_threshold", 0.01, "float",
           "Q-GRBPF drops likelihood weights below weight_threshold/N, 1", minimum=0.0),
         P("eq10_reading", "ratio", "str", "reading of Eq. (10) the illustrations show in full: "
-          "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)"),
+          "'ratio' (importance ratio, corrected) or 'printed' (both are always computed)",
+          changes_records=False),
         P("grid_size", 81, "int", "grid points per parameter of the exact posterior",
           quick=61, minimum=3),
         P("n_monte_carlo", 360, "int", "records (seeds) of the Monte Carlo study", quick=50,
-          minimum=1),
+          minimum=1, changes_records=False),
         P("record", 0, "int", "index of the main record (random streams (seed, record)); the "
-          "Monte Carlo records are record+1, record+2 and so on", minimum=0),
+          "Monte Carlo records are record+1, record+2 and so on", minimum=0,
+          changes_records=False),
         P("timing", True, "bool", "measure computing times (false: a Monte Carlo sample of a "
-          "sweep, which needs only the record's metrics)"),
+          "sweep, which needs only the record's metrics)", changes_records=False),
         P("timing_particles", [100, 300, 1000, 3000, 10000], "list[int]",
           "particle counts of the computing-time comparison", quick=[100, 300, 1000],
-          positive=True),
+          positive=True, changes_records=False),
         P("timing_steps", 100, "int", "steps timed per filter and particle count", quick=50,
-          minimum=1),
+          minimum=1, changes_records=False),
         P("timing_repeats", 3, "int", "repeats per timing of the curves (the fastest is kept)",
-          quick=3, minimum=1),
+          quick=3, minimum=1, changes_records=False),
         P("timing_ratio_particles", 1000, "int", "particles of the paired timing repeats (the "
-          "paper's N)", minimum=2),
+          "paper's N)", minimum=2, changes_records=False),
         P("timing_ratio_repeats", 20, "int", "paired timing repeats (RBPF and both Q-GRBPFs back "
-          "to back) behind the time-ratio evidence", quick=8, minimum=1),
+          "to back) behind the time-ratio evidence", quick=8, minimum=1,
+          changes_records=False),
         P("tolerance_to_truth", 0.05, "float",
           "paper-like convergence: first step with |estimate - truth| below this, 1",
           positive=True),
@@ -68,13 +72,19 @@ SPEC = ChapterSpec(
           minimum=1),
         P("readings_records", 200, "int", "records per reading of the readings study (the "
           "exact posterior under five readings of the printed Q, R and P0, each read at five "
-          "figure horizons; 0 skips it)", quick=40, minimum=0),
+          "figure horizons; 0 skips it)", quick=40, minimum=0, changes_records=False),
         P("seed", 0, "int", "seed of records, initial particles and filters", minimum=0),
     ],
 )
+Settings = SPEC.settings_type
 
 
 PARAMS = ("a", "b")
+
+
+def true_values(settings: Settings) -> dict[str, float]:
+    """The true value of each of :data:`PARAMS` (1)."""
+    return {"a": settings.a_true, "b": settings.b_true}
 
 
 #: Filters whose per-record metrics the table holds.

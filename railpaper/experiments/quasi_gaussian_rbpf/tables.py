@@ -17,6 +17,7 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     PAPER_STEPS,
     PARAMS,
     STYLES,
+    Settings,
 )
 
 
@@ -117,11 +118,11 @@ def _interval(metrics: dict, key: str, digits: int = 3) -> str:
             f"{number(metrics[key + '_high'], digits)}]")
 
 
-def monte_carlo_table(metrics: dict, params: dict) -> str:
+def monte_carlo_table(metrics: dict, settings: Settings) -> str:
     """Per parameter and statistic (rows), per filter and the exact posterior (columns):
     the median or rate over the Monte Carlo records with its 95 % interval."""
     names = ["posterior"] + list(STYLES)
-    short = params["short_horizon"]
+    short = settings.short_horizon
     stats = [("median abs. final error of {p} (1)", "mc_abs_final_error_{p}_{n}", True),
              (f"median abs. error of {{p}} at step {short} (1)", "mc_abs_short_error_{p}_{n}",
               True),
@@ -150,15 +151,15 @@ def timing_table(curves: pd.DataFrame) -> str:
                                  + ["Q-GRBPF (ratio) / RBPF (paper's scheme)"]))
 
 
-def collapse_summary(result, params: dict) -> str:
+def collapse_summary(result, settings: Settings) -> str:
     """Per parameter: the exact posterior's std at step 4 and at the end of the main record,
     and how the printed Q-GRBPF settles, collapses and ends (medians and rates over records)."""
-    m, exact, k4 = result.metrics, result.main.exact, min(4, params["n_steps"]) - 1
+    m, exact, k4 = result.metrics, result.main.exact, min(4, settings.n_steps) - 1
     lines = []
     for j, par in enumerate(PARAMS):
         lines.append(
             f"* **{par}**: the exact posterior std is {number(exact.std[k4, j], 3)} at step "
-            f"{k4 + 1} and {number(exact.std[-1, j], 3)} at step {params['n_steps']} (main "
+            f"{k4 + 1} and {number(exact.std[-1, j], 3)} at step {settings.n_steps} (main "
             f"record); over the records the printed Q-GRBPF settles at step "
             f"{number(m[f'mc_settling_step_{par}_qgrbpf_printed'])} (median), keeps "
             f"{number(m[f'mc_final_std_ratio_{par}_qgrbpf_printed'], 2)} of the posterior's "

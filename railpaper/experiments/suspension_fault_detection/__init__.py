@@ -2,12 +2,12 @@
 how soon a failed anti-yaw damper or a softened secondary spring shows in the data, by the
 residual test, paper 003's RBPF and the exact change posterior.
 
-``SPEC``, ``validate(params)`` and ``run(quick=False, progress=None, **params)`` are what the
-pipeline needs; the package's modules are the appendix's parts (``experiment`` is the whole
+``SPEC``, its ``Settings``, ``validate(settings)`` and ``run(settings, progress=None)`` are what
+the pipeline needs; the package's modules are the appendix's parts (``experiment`` is the whole
 computation, ``figures`` and ``tables`` draw from its result).
 """
 
 from railpaper.experiments.suspension_fault_detection.experiment import run, validate
-from railpaper.experiments.suspension_fault_detection.spec import SPEC
+from railpaper.experiments.suspension_fault_detection.spec import SPEC, Settings
 
-__all__ = ["SPEC", "run", "validate"]
+__all__ = ["SPEC", "Settings", "run", "validate"]

@@ -29,7 +29,7 @@ from railpaper.engine.rbpf import run_rbpf
 from railpaper.engine.residual_alarms import cusum_variance, whitened_innovations
 from railpaper.experiments.lateral_vehicle import LateralRecord
 from railpaper.experiments.suspension_fault_detection.result import Fault
-from railpaper.experiments.suspension_fault_detection.spec import TRACKED
+from railpaper.experiments.suspension_fault_detection.spec import TRACKED, Settings
 from railpaper.models import lateral_16state as L
 
 #: Initial state covariance of every filter (the vehicle starts at rest), state units squared.
@@ -118,8 +118,8 @@ def tracked_system(system, theta: np.ndarray):
     return reduced
 
 
-def rbpf_estimates(p: dict, system, theta: np.ndarray, record: LateralRecord, seed: int
-                   ) -> np.ndarray:
+def rbpf_estimates(settings: Settings, system, theta: np.ndarray, record: LateralRecord,
+                   seed: int) -> np.ndarray:
     """The RBPF's estimates of the tracked parameters after every sample, fraction of nominal
     (K, 2): ``n_particles`` particles from nominal × U(``prior_low``, ``prior_high``) (generator
     ``[seed, 11]``), the paper's scheme (resample and Liu–West move every step,
@@ -127,10 +127,11 @@ def rbpf_estimates(p: dict, system, theta: np.ndarray, record: LateralRecord, se
     columns = [L.PARAM_NAMES.index(name) for name in TRACKED]
     nominal = theta[columns]
     rng = np.random.default_rng([seed, 11])
-    cloud = nominal * rng.uniform(p["prior_low"], p["prior_high"], (p["n_particles"], 2))
+    cloud = nominal * rng.uniform(settings.prior_low, settings.prior_high,
+                                  (settings.n_particles, 2))
     run = run_rbpf(tracked_system(system, theta), record.y, cloud, np.zeros(L.N_STATES),
                    P0_SCALE * np.eye(L.N_STATES), rng, u=record.u_mps, scheme="paper",
-                   delta=p["paper_delta"])
+                   delta=settings.paper_delta)
     return run.theta_mean / nominal
 
 

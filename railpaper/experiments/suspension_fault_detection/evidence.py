@@ -24,7 +24,7 @@ import pandas as pd
 
 from railpaper.engine.residual_alarms import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
-from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S
+from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
 from railpaper.stats import median_interval, quantile_ranks, rate
 
 #: Points of each ROC curve (thresholds), at most.
@@ -163,12 +163,13 @@ def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
     return rows
 
 
-def evidence(records: list[RecordRun], detectors: list[str], speeds: list[float],
-             faults: list[str], p: dict, dt_s: float, monitor_from_s: float
+def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float, ...],
+             faults: list[str], settings: Settings, dt_s: float, monitor_from_s: float
              ) -> tuple[dict, dict, pd.DataFrame]:
-    """Thresholds, metrics and ROC points of every detector, speed and fault."""
+    """Thresholds, metrics and ROC points of every detector, speed and fault (``settings``:
+    the run's ``duration_s`` and ``false_alarm_probability``)."""
     first_row = window_rows(dt_s, monitor_from_s)
-    window_s = p["duration_s"] - monitor_from_s
+    window_s = settings.duration_s - monitor_from_s
     metrics, thresholds, roc = {}, {}, []
     for speed in speeds:
         at = [r for r in records if r.speed_kmh == speed]
@@ -182,7 +183,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: list[float]
             if not calibration or not evaluation:
                 continue
             h = threshold([window_max(r.statistics[detector], first_row) for r in calibration],
-                          p["false_alarm_probability"])
+                          settings.false_alarm_probability)
             thresholds[(detector, speed)] = h
             tag = f"{detector}_{speed_key(speed)}"
             metrics[f"threshold_{tag}"] = h

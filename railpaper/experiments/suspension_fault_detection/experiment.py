@@ -1,6 +1,6 @@
 """Appendix ``suspension-fault-detection``: how soon does a failed damper show in the data?
 
-The whole computation as a function of the parameters.  At every speed of ``speeds_kmh``:
+The whole computation as a function of the settings.  At every speed of ``speeds_kmh``:
 ``records_per_fault`` records of each fault (:mod:`.faults`), the fault at a time drawn from the
 prior's grid (or ``fault_time_s``), and ``fault_free_records`` records without a fault (half set
 the thresholds, half count false alarms); on each, the residual CUSUM and the exact change
@@ -10,13 +10,14 @@ rates, false alarms per hour, post-fault estimates and ROC points.
 
 One record by hand::
 
+    settings = SPEC.resolve({}, quick=True)
     fixed, theta = lateral_vehicle.vehicle()
-    catalogue, settings = faults.catalogue()
-    rec = records.simulate_faulted(params, settings, fixed, theta, catalogue["csaly_0"], 1.5,
-                                   300.0, seed=0)
-    system = lateral_vehicle.filter_system(records.record_parameters(params, 300.0), fixed,
+    catalogue, fault_settings = faults.catalogue()
+    rec = records.simulate_faulted(settings, fault_settings, fixed, theta, catalogue["csaly_0"],
+                                   1.5, 300.0, seed=0)
+    system = lateral_vehicle.filter_system(records.record_settings(settings, 300.0), fixed,
                                            theta, rec.record, theta_ref=theta)
-    g = detectors.residual_cusum(system, theta, rec.record, params["cusum_variance_ratio"])
+    g = detectors.residual_cusum(system, theta, rec.record, settings.cusum_variance_ratio)
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ from railpaper.experiments.suspension_fault_detection.result import (
     IllustratedRecord,
     RecordRun,
 )
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
 from railpaper.models import lateral_16state as L
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
@@ -46,106 +47,108 @@ from railpaper.track import SPECTRA
 FREE_SEED_OFFSETS = {"calibration": 300, "evaluation": 600}
 
 
-def chosen_faults(params: dict) -> list[Fault]:
+def chosen_faults(settings: Settings) -> list[Fault]:
     """The run's faults: the catalogue's named in ``faults``, then the user's own."""
     catalogue, _ = faults.catalogue()
-    names = [n.strip() for n in params["faults"].split(",") if n.strip()]
+    names = [n.strip() for n in settings.faults.split(",") if n.strip()]
     chosen = [catalogue[n] for n in names]
-    if params["extra_fault_parameter"]:
-        name, factor = params["extra_fault_parameter"], params["extra_fault_factor"]
+    if settings.extra_fault_parameter:
+        name, factor = settings.extra_fault_parameter, settings.extra_fault_factor
         chosen.append(Fault(name=f"{name}_x{factor:g}", parameter=name, factor=factor,
                             kind="abrupt", label=f"{name} to {100 * factor:g} % (yours)"))
     return chosen
 
 
-def validate(params: dict) -> None:
-    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
-    catalogue, settings = faults.catalogue()
-    names = [n.strip() for n in params["faults"].split(",") if n.strip()]
+def validate(settings: Settings) -> None:
+    """Refuse non-physical or inconsistent settings with one line, before any work."""
+    catalogue, fault_settings = faults.catalogue()
+    names = [n.strip() for n in settings.faults.split(",") if n.strip()]
     unknown = [n for n in names if n not in catalogue]
-    if unknown or not (names or params["extra_fault_parameter"]):
+    if unknown or not (names or settings.extra_fault_parameter):
         raise ParameterError(f"parameter 'faults': unknown fault '{unknown[0] if unknown else ''}'"
                              f"; faults: {', '.join(catalogue)}")
-    extra = params["extra_fault_parameter"]
+    extra = settings.extra_fault_parameter
     if extra and extra not in L.PARAM_NAMES:
         raise ParameterError(f"parameter 'extra_fault_parameter': unknown parameter '{extra}'; "
                              f"parameters: {', '.join(L.PARAM_NAMES)}")
-    if params["spectrum"] not in SPECTRA:
-        raise ParameterError(f"parameter 'spectrum': unknown spectrum '{params['spectrum']}'")
-    grid = faults.fault_times_s(settings)
-    if params["duration_s"] < grid[-1] + 2.0:
+    if settings.spectrum not in SPECTRA:
+        raise ParameterError(f"parameter 'spectrum': unknown spectrum '{settings.spectrum}'")
+    grid = faults.fault_times_s(fault_settings)
+    if settings.duration_s < grid[-1] + 2.0:
         raise ParameterError(f"parameter 'duration_s' must be >= {grid[-1] + 2.0:g} s: the last "
                              "fault time of the prior plus the 2 s of the longest horizon")
-    t = params["fault_time_s"]
+    t = settings.fault_time_s
     if t != -1.0:
-        if not 0.0 < t < params["duration_s"]:
+        if not 0.0 < t < settings.duration_s:
             raise ParameterError(f"parameter 'fault_time_s' = {t:g} s lies outside the record "
-                                 f"(0 … {params['duration_s']:g} s)")
+                                 f"(0 … {settings.duration_s:g} s)")
         if np.min(np.abs(grid - t)) > 1e-9:
             raise ParameterError(f"parameter 'fault_time_s' = {t:g} s is not on the prior's grid "
                                  f"({grid[0]:g}, {grid[1]:g} … {grid[-1]:g} s)")
-    steps = grid / params["dt_s"]
+    steps = grid / settings.dt_s
     if np.max(np.abs(steps - np.round(steps))) > 1e-6:
-        raise ParameterError(f"parameter 'dt_s' = {params['dt_s']:g} s must divide the fault "
+        raise ParameterError(f"parameter 'dt_s' = {settings.dt_s:g} s must divide the fault "
                              "times' grid spacing")
-    for key, most in (("records_per_fault", 300), ("fault_free_records", 600)):
-        if params[key] > most:
+    for key, value, most in (("records_per_fault", settings.records_per_fault, 300),
+                             ("fault_free_records", settings.fault_free_records, 600)):
+        if value > most:
             raise ParameterError(f"parameter '{key}' must be <= {most} (seed ranges), got "
-                                 f"{params[key]}")
-    if params["prior_low"] >= params["prior_high"]:
+                                 f"{value}")
+    if settings.prior_low >= settings.prior_high:
         raise ParameterError("parameter 'prior_low' must be below 'prior_high'")
-    if not params["false_alarm_probability"] < 1:
+    if not settings.false_alarm_probability < 1:
         raise ParameterError("parameter 'false_alarm_probability' must be < 1")
-    if not params["cusum_variance_ratio"] > 1:
+    if not settings.cusum_variance_ratio > 1:
         raise ParameterError("parameter 'cusum_variance_ratio' must be > 1 (a growth)")
-    if not 0 < params["paper_delta"] < 1:
+    if not 0 < settings.paper_delta < 1:
         raise ParameterError("parameter 'paper_delta' must be in (0, 1)")
     fixed, theta = vehicle()
-    for speed in params["speeds_kmh"]:
-        check_sample_time("dt_s", params["dt_s"], L.build_A_direct(fixed, theta, speed / 3.6),
+    for speed in settings.speeds_kmh:
+        check_sample_time("dt_s", settings.dt_s, L.build_A_direct(fixed, theta, speed / 3.6),
                           f"the lateral vehicle at {speed:g} km/h")
 
 
-def plan(params: dict, chosen: list[Fault]) -> list[tuple[str, str, int, bool]]:
+def plan(settings: Settings, chosen: list[Fault]) -> list[tuple[str, str, int, bool]]:
     """(fault, role, seed, with RBPF) of every record at one speed, in run order (the RBPF only
     where the speed is the first)."""
     items = []
     for fault in chosen:
-        for i in range(params["records_per_fault"]):
-            items.append((fault.name, "fault", params["seed"] + i,
-                          i < params["rbpf_records_per_fault"]))
-    half = params["fault_free_records"] // 2
+        for i in range(settings.records_per_fault):
+            items.append((fault.name, "fault", settings.seed + i,
+                          i < settings.rbpf_records_per_fault))
+    half = settings.fault_free_records // 2
     for role, offset in FREE_SEED_OFFSETS.items():
         for i in range(half):
-            items.append((NO_FAULT, role, params["seed"] + offset + i,
-                          i < params["rbpf_fault_free_records"] // 2))
+            items.append((NO_FAULT, role, settings.seed + offset + i,
+                          i < settings.rbpf_fault_free_records // 2))
     return items
 
 
-def fault_time(params: dict, grid_s: np.ndarray, seed: int) -> float:
+def fault_time(settings: Settings, grid_s: np.ndarray, seed: int) -> float:
     """The record's fault time, s: ``fault_time_s``, or drawn from the prior's grid (generator
     ``[seed, 13]``: the records of one seed share it across faults and speeds)."""
-    if params["fault_time_s"] != -1.0:
-        return float(params["fault_time_s"])
+    if settings.fault_time_s != -1.0:
+        return float(settings.fault_time_s)
     return float(grid_s[np.random.default_rng([seed, 13]).integers(len(grid_s))])
 
 
-def run_record(params: dict, settings: dict, fixed: dict, theta: np.ndarray, fault: Fault | None,
-               role: str, speed_kmh: float, seed: int, values: np.ndarray, with_rbpf: bool
-               ) -> tuple[RecordRun, dict]:
+def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
+               fault: Fault | None, role: str, speed_kmh: float, seed: int, values: np.ndarray,
+               with_rbpf: bool) -> tuple[RecordRun, dict]:
     """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
-    what the illustration needs (RBPF estimates, the exact posterior's fault time and value)."""
-    grid_s = faults.fault_times_s(settings)
-    tau = fault_time(params, grid_s, seed) if fault is not None else -1.0
-    rec = records.simulate_faulted(params, settings, fixed, theta, fault, max(tau, 0.0),
+    what the illustration needs (RBPF estimates, the exact posterior's fault time and value).
+    ``fault_settings`` are the catalogue's (:func:`.faults.catalogue`)."""
+    grid_s = faults.fault_times_s(fault_settings)
+    tau = fault_time(settings, grid_s, seed) if fault is not None else -1.0
+    rec = records.simulate_faulted(settings, fault_settings, fixed, theta, fault, max(tau, 0.0),
                                    speed_kmh, seed)
-    p = records.record_parameters(params, speed_kmh)
-    system = filter_system(p, fixed, theta, rec.record, theta_ref=theta)
-    steps = np.round(grid_s / params["dt_s"]).astype(int) + 1
+    system = filter_system(records.record_settings(settings, speed_kmh), fixed, theta,
+                           rec.record, theta_ref=theta)
+    steps = np.round(grid_s / settings.dt_s).astype(int) + 1
     exact = detectors.exact_change_posterior(system, theta, rec.record, values, steps,
-                                             settings["p_no_fault"])
+                                             fault_settings["p_no_fault"])
     statistics = {"residual": detectors.residual_cusum(system, theta, rec.record,
-                                                       params["cusum_variance_ratio"]),
+                                                       settings.cusum_variance_ratio),
                   "exact": exact.p_changed}
     j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
     estimate = {}
@@ -153,14 +156,14 @@ def run_record(params: dict, settings: dict, fixed: dict, theta: np.ndarray, fau
         estimate["exact"] = float(exact.value_posterior @ (values[:, j] / theta[j]))
     extra = {"exact": exact}
     if with_rbpf:
-        relative = detectors.rbpf_estimates(params, system, theta, rec.record, seed)
+        relative = detectors.rbpf_estimates(settings, system, theta, rec.record, seed)
         statistics["rbpf"] = detectors.rbpf_departure(relative)
         if j is not None and fault.parameter in TRACKED:
             estimate["rbpf"] = float(relative[-1, TRACKED.index(fault.parameter)])
         extra["rbpf_relative"] = relative
     run = RecordRun(fault=NO_FAULT if fault is None else fault.name, role=role,
                     speed_kmh=speed_kmh, seed=seed, fault_time_s=tau,
-                    end_s=rec.end_step * params["dt_s"], flange_contact=rec.flange_contact,
+                    end_s=rec.end_step * settings.dt_s, flange_contact=rec.flange_contact,
                     statistics=statistics, post_fault_estimate=estimate,
                     true_factor_end=float(rec.factor[-1]) if len(rec.factor) else 1.0)
     extra["factor"] = rec.factor
@@ -181,33 +184,33 @@ def illustration(run: RecordRun, extra: dict, fault: Fault, names: list[str], gr
                                                                  exact.value_posterior))))
 
 
-def run(*, quick: bool = False, progress=None, **params) -> FaultDetectionResult:
-    """Run the appendix; ``params`` are the resolved parameters of :data:`SPEC` (``quick`` is
-    not read: ``params`` already hold the quick sizes).  Everything runs on one numba and one
-    OpenBLAS thread (:func:`railpaper.threads.one_thread`): the Kalman banks here are a few
-    dozen filters of 16 states, which a second thread does not speed up, and a chapter that
-    shares the machine with another waits for its own threads otherwise."""
+def run(settings: Settings, *, progress=None) -> FaultDetectionResult:
+    """Run the appendix with ``settings`` (of :data:`SPEC`; a quick run's sizes are already in
+    them).  Everything runs on one numba and one OpenBLAS thread
+    (:func:`railpaper.threads.one_thread`): the Kalman banks here are a few dozen filters of 16
+    states, which a second thread does not speed up, and a chapter that shares the machine with
+    another waits for its own threads otherwise."""
     with one_thread():
-        return _run(params, progress)
+        return _run(settings, progress)
 
 
-def _run(params: dict, progress) -> FaultDetectionResult:
+def _run(settings: Settings, progress) -> FaultDetectionResult:
     """:func:`run` on the current threads."""
-    validate(params)
+    validate(settings)
     progress = progress or default_progress()
     started = time.perf_counter()
     fixed, theta = vehicle()
-    _, settings = faults.catalogue()
-    chosen = chosen_faults(params)
+    _, fault_settings = faults.catalogue()
+    chosen = chosen_faults(settings)
     by_name = {f.name: f for f in chosen}
     names, values = detectors.hypotheses(chosen, theta)
     if not names:
         raise ParameterError("parameter 'faults': the exact reference needs at least one abrupt "
                              "fault")
-    grid_s = faults.fault_times_s(settings)
-    speeds = params["speeds_kmh"]
+    grid_s = faults.fault_times_s(fault_settings)
+    speeds = settings.speeds_kmh
     records_, illustrated, spent = [], None, {"rbpf": 0.0, "other": 0.0}
-    items = plan(params, chosen)
+    items = plan(settings, chosen)
     total = len(items) * len(speeds)
     for s, speed in enumerate(speeds):
         for i, (fault_name, role, seed, with_rbpf) in enumerate(items):
@@ -215,16 +218,16 @@ def _run(params: dict, progress) -> FaultDetectionResult:
                      f"{speed:g} km/h, {fault_name}, seed {seed}")
             t0 = time.perf_counter()
             use_rbpf = with_rbpf and s == 0
-            run_, extra = run_record(params, settings, fixed, theta, by_name.get(fault_name),
-                                     role, speed, seed, values, use_rbpf)
+            run_, extra = run_record(settings, fault_settings, fixed, theta,
+                                     by_name.get(fault_name), role, speed, seed, values, use_rbpf)
             spent["rbpf" if use_rbpf else "other"] += time.perf_counter() - t0
             records_.append(run_)
             if illustrated is None and s == 0 and role == "fault":
                 illustrated = illustration(run_, extra, by_name[fault_name], names, grid_s,
-                                           params["dt_s"])
+                                           settings.dt_s)
     monitor_from = float(grid_s[0])
     metrics, thresholds, roc = evidence(records_, list(DETECTORS), speeds,
-                                        [f.name for f in chosen], params, params["dt_s"],
+                                        [f.name for f in chosen], settings, settings.dt_s,
                                         monitor_from)
     critical = faults.critical_speeds(fixed, theta, chosen)
     for row in critical.itertuples():
@@ -236,7 +239,7 @@ def _run(params: dict, progress) -> FaultDetectionResult:
     return FaultDetectionResult(metrics=metrics, timings=timings,
                                 timeseries=_timeseries(illustrated), faults=tuple(chosen),
                                 records=tuple(records_), thresholds=thresholds,
-                                dt_s=params["dt_s"], monitor_from_s=monitor_from,
+                                dt_s=settings.dt_s, monitor_from_s=monitor_from,
                                 critical_speeds=critical, roc=roc, illustrated=illustrated)
 
 

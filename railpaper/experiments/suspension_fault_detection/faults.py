@@ -24,7 +24,8 @@ CRITICAL_SEARCH_KMH = np.arange(100.0, 600.0 + 1e-9, 2.5)
 
 
 def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
-    """The faults by name, and the settings (:data:`SETTINGS`, SI units) of the data file."""
+    """The faults by name, and the settings (:data:`SETTINGS`, SI units) of the data file (a
+    dict, ``fault_settings`` in this package: not the appendix's ``Settings``)."""
     document = read_toml(path)
     faults = {}
     for name, row in document.get("faults", {}).items():
@@ -37,28 +38,28 @@ def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
                             f"{', '.join(L.PARAM_NAMES)}), factor >= 0, kind (abrupt or drift) "
                             "and source")
         faults[name] = fault
-    settings = load_quantities(path, SETTINGS, section="settings")
-    return faults, {k: float(q.value) for k, q in settings.items()}
+    quantities = load_quantities(path, SETTINGS, section="settings")
+    return faults, {k: float(q.value) for k, q in quantities.items()}
 
 
-def fault_times_s(settings: dict) -> np.ndarray:
+def fault_times_s(fault_settings: dict) -> np.ndarray:
     """The prior's grid of fault times, s (uniform over it)."""
-    first, last, step = (settings[k] for k in ("fault_time_first_s", "fault_time_last_s",
+    first, last, step = (fault_settings[k] for k in ("fault_time_first_s", "fault_time_last_s",
                                                "fault_time_spacing_s"))
     return first + step * np.arange(int(round((last - first) / step)) + 1)
 
 
-def factor_at(fault: Fault, settings: dict, time_s: np.ndarray, fault_time_s: float
+def factor_at(fault: Fault, fault_settings: dict, time_s: np.ndarray, fault_time_s: float
               ) -> np.ndarray:
     """The faulted parameter's value at ``time_s``, fraction of nominal (1 before the fault)."""
     t = np.asarray(time_s, float) - fault_time_s
     if fault.kind == "abrupt":
         return np.where(t >= 0, fault.factor, 1.0)
-    ramp = np.clip(t / settings["drift_s"], 0.0, 1.0)
+    ramp = np.clip(t / fault_settings["drift_s"], 0.0, 1.0)
     return 1.0 + (fault.factor - 1.0) * ramp
 
 
-def schedule(fault: Fault | None, settings: dict, theta: np.ndarray, fault_step: int,
+def schedule(fault: Fault | None, fault_settings: dict, theta: np.ndarray, fault_step: int,
              fine_steps: int, dt_fine_s: float) -> tuple[list[np.ndarray], list[int]]:
     """θ piecewise constant over the truth's fine steps: ``(thetas, starts)`` for
     :func:`railpaper.models.lateral_16state.simulate_truth_schedule`.  An abrupt fault changes θ
@@ -72,8 +73,8 @@ def schedule(fault: Fault | None, settings: dict, theta: np.ndarray, fault_step:
         changed = theta.copy()
         changed[j] *= fault.factor
         return thetas + [changed], starts + [min(fault_step, fine_steps)]
-    pieces = int(settings["drift_pieces"])
-    span = settings["drift_s"] / dt_fine_s
+    pieces = int(fault_settings["drift_pieces"])
+    span = fault_settings["drift_s"] / dt_fine_s
     for i in range(pieces):
         start = fault_step + int(round(i * span / pieces))
         if start >= fine_steps:

@@ -1,7 +1,7 @@
 """Figures of appendix ``suspension-fault-detection`` (matplotlib, ≤ 7 in wide, legends below the
 axes, outside the data).
 
-Each function takes the run's :class:`FaultDetectionResult` and its parameters and returns the
+Each function takes the run's :class:`FaultDetectionResult` and its settings and returns the
 figure; the notebook saves it and shows it as a numbered MyST figure.  Detectors keep one colour
 and marker throughout (:data:`DETECTOR_STYLES`); a detector that did not run at a speed (the RBPF
 beyond the first) is left out of that speed's panels.
@@ -16,7 +16,7 @@ from matplotlib.patches import Patch
 
 from railpaper.experiments.display import number
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, speed_key
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
 from railpaper.experiments.suspension_fault_detection.tables import (
     DETECTOR_SHORT,
     PARAMETERS,
@@ -57,7 +57,7 @@ def _mark_events(ax, run, monitor_from_s: float) -> None:
         ax.axvline(run.end_s, color="k", lw=1.4)
 
 
-def record_around_fault(result, params):
+def record_around_fault(result, settings: Settings):
     """The illustrated record (first speed): (a) the RBPF's estimates of K_sy and C_saly as
     fractions of nominal with their true values (dashed), (b) the residual CUSUM statistic,
     (c) the exact posterior probability that a fault has happened and (d) the RBPF's departure
@@ -151,15 +151,15 @@ def _delay_point(ax, x, metrics, key, beyond, colour, marker) -> bool:
     return True
 
 
-def delay_by_fault(result, params):
+def delay_by_fault(result, settings: Settings):
     """Per speed (columns), the median detection delay of each detector (offset markers) on
     each fault (x), with its 95 % interval over records, log scale; a median or interval end
     beyond the record (fewer than half the records alarmed after the fault) is drawn as an
     upward triangle in the grey band at the top. A grey bar marks the median time from the fault
     to flange contact, where the fault's records reach it."""
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     m = result.metrics
-    longest = params["duration_s"] - result.monitor_from_s
+    longest = settings.duration_s - result.monitor_from_s
     beyond = BEYOND_FACTOR * longest
     fig, axes = plt.subplots(1, len(speeds), figsize=(7, 3.9), sharey=True, squeeze=False)
     axes = axes[0]
@@ -213,12 +213,12 @@ def delay_by_fault(result, params):
     return fig
 
 
-def roc_curves(result, params):
+def roc_curves(result, settings: Settings):
     """At the first speed, one panel per fault: each detector's rate of detection within 1 s
     against its false alarms per hour on the fault-free records as the threshold varies (log x;
     zero false alarms drawn at the left edge, tick "0"), with the calibrated threshold's
     operating point (false alarms on the evaluation records) as a large open marker."""
-    speed = params["speeds_kmh"][0]
+    speed = settings.speeds_kmh[0]
     sk = speed_key(speed)
     m = result.metrics
     roc = result.roc
@@ -283,7 +283,7 @@ def roc_curves(result, params):
     return fig
 
 
-def fault_time_posterior(result, params):
+def fault_time_posterior(result, settings: Settings):
     """The illustrated record's exact posterior: (left) P(fault time | the whole record, a fault
     happened) over the prior's grid of fault times, with the true fault time marked; (right)
     P(which fault | the record, a fault happened) over the abrupt faults of the Kalman bank,

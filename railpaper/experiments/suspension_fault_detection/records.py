@@ -18,11 +18,13 @@ import numpy as np
 
 from railpaper.experiments.lateral_vehicle import (
     LateralRecord,
+    RecordSettings,
     sampled_record,
     track_velocity,
 )
 from railpaper.experiments.suspension_fault_detection import faults as F
 from railpaper.experiments.suspension_fault_detection.result import Fault
+from railpaper.experiments.suspension_fault_detection.spec import Settings
 from railpaper.models import lateral_16state as L
 
 
@@ -52,29 +54,32 @@ class FaultedRecord:
     factor: np.ndarray
 
 
-def record_parameters(params: dict, speed_kmh: float) -> dict:
-    """The settings :mod:`railpaper.experiments.lateral_vehicle` reads, for one speed."""
-    return dict(params, speed_kmh=speed_kmh,
-                n_steps=int(round(params["duration_s"] / params["dt_s"])))
+def record_settings(settings: Settings, speed_kmh: float) -> RecordSettings:
+    """What :mod:`railpaper.experiments.lateral_vehicle` reads of a record at one speed: the
+    appendix's sample time, truth substeps, track and sensors, ``duration_s / dt_s`` steps."""
+    return RecordSettings.of(settings, speed_kmh=speed_kmh,
+                             n_steps=int(round(settings.duration_s / settings.dt_s)))
 
 
-def simulate_faulted(params: dict, settings: dict, fixed: dict, theta: np.ndarray,
+def simulate_faulted(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
                      fault: Fault | None, fault_time_s: float, speed_kmh: float, seed: int
                      ) -> FaultedRecord:
     """The record of ``seed`` at ``speed_kmh`` with ``fault`` from ``fault_time_s`` on (None:
-    fault-free); sensor noise and track as chapter 003's records."""
-    p = record_parameters(params, speed_kmh)
-    sub, K = p["truth_substeps"], p["n_steps"]
-    dt_fine = p["dt_s"] / sub
-    dq = track_velocity(p, fixed, seed)
-    fault_sample = int(round(fault_time_s / p["dt_s"])) if fault is not None else K
-    thetas, starts = F.schedule(fault, settings, theta, fault_sample * sub, K * sub, dt_fine)
+    fault-free); sensor noise and track as chapter 003's records.  ``fault_settings`` are the
+    catalogue's (:func:`~railpaper.experiments.suspension_fault_detection.faults.catalogue`)."""
+    rs = record_settings(settings, speed_kmh)
+    sub, K = rs.truth_substeps, rs.n_steps
+    dt_fine = rs.dt_s / sub
+    dq = track_velocity(rs, fixed, seed)
+    fault_sample = int(round(fault_time_s / rs.dt_s)) if fault is not None else K
+    thetas, starts = F.schedule(fault, fault_settings, theta, fault_sample * sub, K * sub,
+                                dt_fine)
     v = speed_kmh / 3.6
     states = L.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine, dq[:-1])
     H_pieces = np.stack([L.measurement_matrix(L.build_A_direct(fixed, th, v)) for th in thetas])
     piece = np.searchsorted(np.asarray(starts), np.arange(1, K + 1) * sub, side="left") - 1
-    record = sampled_record(p, seed, states, H_pieces[piece], dq)
-    contact = L.flange_contact_step(states, settings["flange_clearance_m"])
+    record = sampled_record(rs, seed, states, H_pieces[piece], dq)
+    contact = L.flange_contact_step(states, fault_settings["flange_clearance_m"])
     end = K if contact < 0 else min(K, (contact - 1) // sub)
     if end < K:
         record = replace(record, y=record.y[:end], u_mps=record.u_mps[:end])
@@ -85,4 +90,4 @@ def simulate_faulted(params: dict, settings: dict, fixed: dict, theta: np.ndarra
                          end_step=end, flange_contact=end < K, factor=factor)
 
 
-__all__ = ["FaultedRecord", "record_parameters", "simulate_faulted"]
+__all__ = ["FaultedRecord", "record_settings", "simulate_faulted"]

@@ -19,7 +19,8 @@ SPEC = ChapterSpec(
                 "16)",
     parameters=[
         P("seed", 0, "int", "first record: fault records use seeds seed … seed + 299, fault-free "
-          "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0),
+          "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0,
+          changes_records=False),
         P("speeds_kmh", [300.0, 200.0], "list[float]", "vehicle speeds, km/h (the RBPF runs at "
           "the first)", positive=True),
         P("faults", "csaly_half,csaly_20,csaly_0,ksy_70,csaly_drift", "str",
@@ -39,19 +40,20 @@ SPEC = ChapterSpec(
           minimum=1),
         *TRACK_AND_SENSORS,
         P("records_per_fault", 30, "int", "records per fault and speed (Monte Carlo samples, at "
-          "most 300)", quick=3, minimum=2),
+          "most 300)", quick=3, minimum=2, changes_records=False),
         P("fault_free_records", 60, "int", "fault-free records per speed: the first half sets "
           "each detector's threshold, the second half measures its false alarms (at most 600)",
-          quick=6, minimum=4),
+          quick=6, minimum=4, changes_records=False),
         P("false_alarm_probability", 0.05, "float", "each detector's threshold: the probability "
           "of an alarm in a fault-free record's monitoring window (set on the first half of the "
-          "fault-free records), 1", positive=True),
+          "fault-free records), 1", positive=True, changes_records=False),
         P("cusum_variance_ratio", 2.0, "float", "residual test: the growth of the whitened "
           "innovations' variance its CUSUM is tuned to, 1", positive=True),
         P("rbpf_records_per_fault", 12, "int", "records per fault (the first ones, first speed) "
-          "also filtered by the RBPF", quick=2, minimum=2),
+          "also filtered by the RBPF", quick=2, minimum=2, changes_records=False),
         P("rbpf_fault_free_records", 16, "int", "fault-free records (first speed) filtered by "
-          "the RBPF: half set its threshold, half measure its false alarms", quick=2, minimum=2),
+          "the RBPF: half set its threshold, half measure its false alarms", quick=2, minimum=2,
+          changes_records=False),
         P("n_particles", 100, "int", "RBPF particles", quick=40, minimum=2),
         P("paper_delta", 0.98, "float", "Liu-West delta of the RBPF (paper 003's scheme), 1",
           positive=True),
@@ -61,6 +63,8 @@ SPEC = ChapterSpec(
           "value", positive=True),
     ],
 )
+#: The appendix's settings (a frozen dataclass of the parameters above).
+Settings = SPEC.settings_type
 
 #: The detectors compared, with their display names.
 DETECTORS = {"residual": "residual CUSUM (nominal Kalman filter)",
@@ -73,4 +77,4 @@ TRACKED = ("ksy", "csaly")
 #: Detection horizons after the fault, s.
 WITHIN_S = (0.5, 1.0, 2.0)
 
-__all__ = ["DETECTORS", "SPEC", "TRACKED", "WITHIN_S"]
+__all__ = ["DETECTORS", "SPEC", "Settings", "TRACKED", "WITHIN_S"]

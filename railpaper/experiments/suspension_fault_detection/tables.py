@@ -3,7 +3,7 @@ in the headers): the faults and their critical speeds, each detector's detection
 false alarms and post-fault estimates, and the short names of faults and detectors that the
 figures share.
 
-Every function takes the run's :class:`FaultDetectionResult` (and its parameters) and returns
+Every function takes the run's :class:`FaultDetectionResult` (and its settings) and returns
 Markdown: numbers to four significant digits, "beyond the record"
 for the −1 of a median delay that no record reached, "—" where a detector has no metric (the RBPF
 runs only at the first speed).
@@ -15,7 +15,11 @@ import pandas as pd
 
 from railpaper.experiments.display import markdown, number
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault, speed_key
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, WITHIN_S
+from railpaper.experiments.suspension_fault_detection.spec import (
+    DETECTORS,
+    WITHIN_S,
+    Settings,
+)
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
 DETECTOR_SHORT = {"residual": "residual CUSUM", "rbpf": "RBPF band", "exact": "exact posterior"}
@@ -99,7 +103,7 @@ def faults_table(result) -> str:
         "critical speed after the fault (km/h)"]))
 
 
-def detection_table(result, params) -> str:
+def detection_table(result, settings: Settings) -> str:
     """One table per speed (the run's order, each under a bold "<speed> km/h" line), one row
     per fault and for each detector the median detection delay with its 95 % interval over
     records (s; "beyond the record" where fewer than half the records alarm after the fault)
@@ -107,7 +111,7 @@ def detection_table(result, params) -> str:
     detector not run at that speed."""
     short, long_ = WITHIN_S[0], WITHIN_S[-1]
     out = []
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         sk = speed_key(speed)
         columns = ["fault"]
         for det in DETECTORS:
@@ -132,13 +136,13 @@ def detection_table(result, params) -> str:
     return "\n".join(out)
 
 
-def false_alarm_table(result, params) -> str:
+def false_alarm_table(result, settings: Settings) -> str:
     """Per speed and detector: its alarm threshold (set on the calibration records at the run's
     false-alarm probability; dimensionless, the statistic named), the false alarms per hour on
     the evaluation records with their 95 % interval, and how many evaluation records there
     were; detectors not run at a speed are left out."""
     rows = []
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         sk = speed_key(speed)
         for det in DETECTORS:
             key = f"false_alarms_per_hour_{det}_{sk}"
@@ -153,14 +157,14 @@ def false_alarm_table(result, params) -> str:
         "false alarms per hour [95 %] (1/h)", "evaluation records"]))
 
 
-def estimate_table(result, params) -> str:
+def estimate_table(result, settings: Settings) -> str:
     """Per speed and fault, each estimating detector's median |post-fault estimate − truth| of
     the faulted parameter at the record's end (fraction of nominal) with its 95 % interval and
     the number of records ("—": not estimated — the RBPF runs at the first speed only, tracks
     K_sy and C_saly only, and needs two records)."""
     estimators = [d for d in ("exact", "rbpf") if d in DETECTORS]
     rows = []
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         sk = speed_key(speed)
         for f in result.faults:
             row = [number(speed), f.label]

@@ -18,28 +18,28 @@ SPEEDS = ("60kmh", "80kmh", "120kmh", "160kmh")
 
 @pytest.fixture(scope="module")
 def quick_run():
-    params = SPEC.resolve({}, quick=True)
-    return params, ch.run(quick=True, **params)
+    settings = SPEC.resolve({}, quick=True)
+    return settings, ch.run(settings)
 
 
 def test_spec_and_validation():
     assert SPEC.name == "partial-state-observer"
     assert SPEC.notebook == "partial_state_observer.ipynb"
     quick = SPEC.resolve({}, quick=True)
-    assert quick["speeds_kmh"] == [60.0, 80.0, 120.0, 160.0] and quick["duration_s"] >= 2.0
-    assert quick["n_seeds"] >= 5 and SPEC.resolve({})["n_seeds"] >= 20
-    assert SPEC.resolve({})["suspension_reading"] == "labels"
+    assert quick.speeds_kmh == (60.0, 80.0, 120.0, 160.0) and quick.duration_s >= 2.0
+    assert quick.n_seeds >= 5 and SPEC.resolve({}).n_seeds >= 20
+    assert SPEC.resolve({}).suspension_reading == "labels"
     for bad in ({"beta": 1.0}, {"error_window_start_s": 9.0}, {"dt_s": 0.01},
                 {"wavelength_min_m": 400.0}, {"speeds_kmh": [60.0, 60.0]},
                 {"suspension_reading": "swapped"}, {"n_seeds": 1000}):
         with pytest.raises(ParameterError):
-            ch.run(quick=True, **SPEC.resolve(bad, quick=True))
+            ch.run(SPEC.resolve(bad, quick=True))
     with pytest.raises(ParameterError):
         SPEC.resolve({"alpha": 3.0})
 
 
 def test_metric_keys_and_timeseries(quick_run):
-    params, result = quick_run
+    settings, result = quick_run
     metrics = check_metrics(result.metrics)
     for lab in SPEEDS:
         for suffix in ("", "_kalman"):
@@ -49,17 +49,17 @@ def test_metric_keys_and_timeseries(quick_run):
         assert f"existence_rank_{name}" in metrics and f"existence_ok_{name}" in metrics
     assert metrics["existence_ok_both"] and not metrics["existence_ok_displacements"]
     assert not metrics["existence_ok_accelerations"]
-    n = params["n_seeds"]
+    n = settings.n_seeds
     for reading in ("labels", "symbols"):           # every reading's evidence in every run
         assert metrics[f"mc_convergence_time_s_{reading}_n"] == n
         assert metrics[f"mc_trend_max_error_rho_{reading}_n"] == n
-        assert metrics[f"mc_converged_rate_{reading}_n"] == n * len(params["speeds_kmh"])
+        assert metrics[f"mc_converged_rate_{reading}_n"] == n * len(settings.speeds_kmh)
         assert metrics[f"rank_Q0_pbh_{reading}"] == 20 and metrics[f"rank_L_{reading}"] == 4
         assert metrics[f"rank_C_printed_{reading}"] == 6 and metrics[f"rank_CLt_printed_{reading}"] == 4
     assert metrics["lmi19_printed_feasible"] is False
     ts = result.timeseries
     assert ts.columns[0] == "t_s"
-    assert len(ts) == round(params["duration_s"] / params["dt_s"]) + 1
+    assert len(ts) == round(settings.duration_s / settings.dt_s) + 1
     for lab in SPEEDS:
         for i in range(1, 5):
             assert f"zw{i}_true_m_{lab}" in ts and f"zw{i}_est_m_{lab}" in ts
@@ -68,7 +68,7 @@ def test_metric_keys_and_timeseries(quick_run):
 
 def test_independent_expectations(quick_run):
     """Against theory and baselines, not against earlier output."""
-    params, result = quick_run
+    settings, result = quick_run
     m = result.metrics
     v = result.design.vehicle
     assert m["hb0_fixed_pole_per_s"] == pytest.approx(
@@ -76,8 +76,8 @@ def test_independent_expectations(quick_run):
     assert m["hb0_fixed_pole_per_s_labels"] == pytest.approx(-2.14e6 / 4.9e4, rel=1e-6)
     assert m["hb0_fixed_pole_per_s_symbols"] == pytest.approx(-2.535e6 / 1.96e5, rel=1e-6)
     assert m["observer_residual"] < 1e-10 and m["hb0_residual"] < 1e-10
-    assert params["alpha_per_s"] <= m["observer_slowest_rate_per_s"] * (1 + 1e-5)
-    assert m["observer_fastest_rate_per_s"] <= params["beta"] * params["alpha_per_s"] * (1 + 1e-5)
+    assert settings.alpha_per_s <= m["observer_slowest_rate_per_s"] * (1 + 1e-5)
+    assert m["observer_fastest_rate_per_s"] <= settings.beta * settings.alpha_per_s * (1 + 1e-5)
     for lab in SPEEDS:
         # ẑ = q is off by the contact deflection only: dynamic force / k_H, micrometres
         assert m[f"max_error_after_1s_m_{lab}_q"] < 50e-6
@@ -99,16 +99,16 @@ def test_independent_expectations(quick_run):
         gap = np.abs(hb0.convergence_time_s - hb0.predicted_convergence_s)
         assert np.all(gap < 0.2 * hb0.predicted_convergence_s + 0.005)
     # the single record is one run of the Monte Carlo: same numbers
-    own = mc[(mc.reading == "labels") & (mc.seed == params["seed"]) & (mc.estimator == "paper")]
-    for speed, lab in zip(params["speeds_kmh"], SPEEDS):
+    own = mc[(mc.reading == "labels") & (mc.seed == settings.seed) & (mc.estimator == "paper")]
+    for speed, lab in zip(settings.speeds_kmh, SPEEDS):
         row = own[own.speed_kmh == speed].iloc[0]
         assert row.max_error_after_1s_m == pytest.approx(m[f"max_error_after_1s_m_{lab}"], rel=1e-12)
 
 
 def test_deterministic():
-    params = SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 2, "alpha_sweep_per_s": [20.0]},
-                             quick=True)
-    a, b = ch.run(quick=True, **params), ch.run(quick=True, **params)
+    settings = SPEC.resolve({"speeds_kmh": [80.0], "n_seeds": 2, "alpha_sweep_per_s": [20.0]},
+                            quick=True)
+    a, b = ch.run(settings), ch.run(settings)
     assert json.dumps(a.metrics, sort_keys=True) == json.dumps(b.metrics, sort_keys=True)
     assert a.timeseries.equals(b.timeseries)
 

@@ -144,36 +144,36 @@ def test_readings_of_table1():
 
 
 def test_batched_simulators_match_single_runs():
-    p = SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
-    ctx = ch._Context(p, "symbols")
-    t_s, q_in, fixed = ch.track_inputs(ctx, p, [4, 5], [60.0, 120.0], 310.0)
+    settings = SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
+    ctx = ch._Context(settings, "symbols")
+    t_s, q_in, fixed = ch.track_inputs(ctx, settings, [4, 5], [60.0, 120.0], 310.0)
     assert q_in.shape[:2] == (2, 2) and fixed.shape == (2,)
-    tr = ch.simulate_truths(ctx, p, q_in, t_s, [4, 5], [60.0, 120.0])
+    tr = ch.simulate_truths(ctx, settings, q_in, t_s, [4, 5], [60.0, 120.0])
     m = ctx.model
-    Phi, G0, G1 = foh(m.A, m.B, p["dt_s"])
+    Phi, G0, G1 = foh(m.A, m.B, settings.dt_s)
     for i in range(2):
         for j in range(2):
             x0 = -np.linalg.solve(m.A, m.B @ q_in[i, j, 0])
             ref = simulate_foh(Phi, G0, G1, q_in[i, j], x0)[ctx.lead:]
             np.testing.assert_allclose(tr["x"][i, j], ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
-    est = ch.run_kalman(ctx, 120.0, tr, 1, p["initial_error_m"])
+    est = ch.run_kalman(ctx, 120.0, tr, 1, settings.initial_error_m)
     one = ch.record(tr, 1, 1)
     rms = np.sqrt(np.mean(one["y_clean"] ** 2, axis=0))
     kf = kb.steady_state_kalman(*ctx.kalman_model[120.0], np.diag(np.maximum(one["sigma"], 1e-6 * rms) ** 2))
     q, dq = one["q_m"][0], (one["q_m"][1] - one["q_m"][0]) / t_s[1]
     x0 = np.concatenate([one["x"][0], np.column_stack([q, dq]).ravel()])
-    x0[[12, 14, 16, 18]] += p["initial_error_m"]
-    x0[20::2] += p["initial_error_m"]
+    x0[[12, 14, 16, 18]] += settings.initial_error_m
+    x0[20::2] += settings.initial_error_m
     np.testing.assert_allclose(est[1], kf.run(one["y"], x0)[:, [12, 14, 16, 18]], rtol=1e-9, atol=1e-15)
-    hb0 = ch.monte_carlo_runs(ctx, p, tr, kalman=False)["hb0"]
+    hb0 = ch.monte_carlo_runs(ctx, settings, tr, kalman=False)["hb0"]
     np.testing.assert_allclose(hb0[0, 1], ctx.hb0_zoh.run(tr["y"][0, 1], None,
-                                                          tr["z_m"][0, 1, 0] + p["initial_error_m"]))
+                                                          tr["z_m"][0, 1, 0] + settings.initial_error_m))
 
 
 @pytest.mark.parametrize("reading", ev.READINGS)
 def test_hb0_poles_at_primary_corner_in_both_readings(reading):
-    p = SPEC.resolve({}, quick=True)
-    ctx = ch._Context(p, reading, kalman=False)
+    settings = SPEC.resolve({}, quick=True)
+    ctx = ch._Context(settings, reading, kalman=False)
     v = v10.load_parameters(**ev.suspension(reading))
     np.testing.assert_allclose(ctx.hb0.poles.real,
                                -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rtol=1e-5)

@@ -67,20 +67,20 @@ def test_page_structure():
                 assert name not in src, (name, src)
 
 
-def _grid_posterior_mean(p, y):
+def _grid_posterior_mean(settings, y):
     """Independent reference: a plain Kalman filter per grid cell centre (the model of
     Eqs. 20-21 typed from the paper), uniform prior, posterior mean of (a, b) after the last y."""
     G = np.array([[-1.0, 0.38], [-1.5, 1.0]])
     H = np.array([[1.0, -0.38], [0.5, 0.7]])
-    Q, R = p["q_var"] * G @ G.T, p["r_var"] * np.eye(2)
-    n = p["grid_size"]
-    a_axis = p["a_min"] + (np.arange(n) + 0.5) * (p["a_max"] - p["a_min"]) / n
-    b_axis = p["b_min"] + (np.arange(n) + 0.5) * (p["b_max"] - p["b_min"]) / n
+    Q, R = settings.q_var * G @ G.T, settings.r_var * np.eye(2)
+    n = settings.grid_size
+    a_axis = settings.a_min + (np.arange(n) + 0.5) * (settings.a_max - settings.a_min) / n
+    b_axis = settings.b_min + (np.arange(n) + 0.5) * (settings.b_max - settings.b_min) / n
     points, logliks = [], []
     for a in a_axis:
         for b in b_axis:
             F = np.array([[0.0, 1.0], [a, b]])
-            x, P, ll = np.zeros(2), p["p0_std"] ** 2 * np.eye(2), 0.0
+            x, P, ll = np.zeros(2), settings.p0_std ** 2 * np.eye(2), 0.0
             for yk in y:
                 x, P = F @ x, F @ P @ F.T + Q
                 S = H @ P @ H.T + R
@@ -96,28 +96,29 @@ def _grid_posterior_mean(p, y):
 
 
 def test_typed_result_holds_the_record_and_its_exact_posterior():
-    p = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13, n_monte_carlo=2,
-                                  timing=False, readings_records=0), True)
-    result = chapter.run(**p)
+    settings = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13,
+                                         n_monte_carlo=2, timing=False, readings_records=0), True)
+    result = chapter.run(settings)
     main = result.main
-    assert main.index == p["record"] and main.measurements.shape == (40, 2)
+    assert main.index == settings.record and main.measurements.shape == (40, 2)
     assert main.states.shape == (41, 2) and list(main.steps) == list(range(1, 41))
-    np.testing.assert_allclose(main.exact.mean[-1], _grid_posterior_mean(p, main.measurements),
+    np.testing.assert_allclose(main.exact.mean[-1],
+                               _grid_posterior_mean(settings, main.measurements),
                                rtol=1e-8, atol=1e-10)
     for j, par in enumerate("ab"):
         for name in ("rbpf", "qgrbpf"):
             assert result.metrics[f"final_error_{par}_{name}"] == pytest.approx(
-                main.runs[name].theta_mean[-1, j] - p[f"{par}_true"], abs=1e-15)
+                main.runs[name].theta_mean[-1, j] - (settings.a_true, settings.b_true)[j], abs=1e-15)
     assert list(result.monte_carlo.replicate) == [0, 1] and result.computing_time is None
     assert result.data == {}
 
 
 def test_tables_show_the_monte_carlo_medians():
     """The page's Monte Carlo table holds numpy's medians of the per-record |final errors|."""
-    p = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13, n_monte_carlo=5,
-                                  timing=False, readings_records=0), True)
-    result = chapter.run(**p)
-    table = tables.monte_carlo_table(result.metrics, p)
+    settings = chapter.SPEC.resolve(dict(n_particles=60, n_steps=40, grid_size=13,
+                                         n_monte_carlo=5, timing=False, readings_records=0), True)
+    result = chapter.run(settings)
+    table = tables.monte_carlo_table(result.metrics, settings)
     row = next(r for r in table.splitlines() if r.startswith("| median abs. final error of a"))
     cells = [c.strip() for c in row.strip("|").split("|")][1:]
     for cell, name in zip(cells, ["posterior", "rbpf", "rbpf_working", "qgrbpf", "qgrbpf_printed"]):
@@ -202,15 +203,15 @@ def test_page_has_no_stray_output(quick_chapter_dir, built_book):
 def test_final_errors_are_the_timeseries_last_row(quick_chapter_dir):
     out = quick_chapter_dir(CHAPTER)
     run = json.loads((out / "metrics.json").read_text())
-    params, metrics = run["parameters"], run["metrics"]
+    written, metrics = run["parameters"], run["metrics"]
     last = pd.read_csv(out / "timeseries.csv").iloc[-1]
     for filt in ("rbpf", "qgrbpf"):
-        assert metrics[f"final_error_a_{filt}"] == pytest.approx(last[f"a_est_{filt}"] - params["a_true"],
+        assert metrics[f"final_error_a_{filt}"] == pytest.approx(last[f"a_est_{filt}"] - written["a_true"],
                                                                  abs=1e-12)
-        assert metrics[f"final_error_b_{filt}"] == pytest.approx(last[f"b_est_{filt}"] - params["b_true"],
+        assert metrics[f"final_error_b_{filt}"] == pytest.approx(last[f"b_est_{filt}"] - written["b_true"],
                                                                  abs=1e-12)
     # the exact posterior concentrates: its last std is well below the prior box's std
-    assert last.a_post_std < (params["a_max"] - params["a_min"]) / np.sqrt(12) / 3
+    assert last.a_post_std < (written["a_max"] - written["a_min"]) / np.sqrt(12) / 3
 
 
 @pytest.mark.slow

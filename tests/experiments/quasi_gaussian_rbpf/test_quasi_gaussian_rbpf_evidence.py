@@ -139,17 +139,18 @@ def test_median_step_time_ignores_an_interrupted_step():
 def test_without_threshold_is_the_same_stream():
     """With weight_threshold = 0 the 'no threshold' runs repeat the thresholded ones exactly, so
     the paired threshold effect is exactly zero: the pairing shares the random stream."""
-    p = chapter.SPEC.resolve(dict(n_particles=40, n_steps=25, grid_size=9, n_monte_carlo=3,
-                                  timing=False, weight_threshold=0.0, readings_records=0), quick=True)
-    m = chapter.run(quick=True, **p).metrics
+    settings = chapter.SPEC.resolve(dict(n_particles=40, n_steps=25, grid_size=9, n_monte_carlo=3,
+                                         timing=False, weight_threshold=0.0, readings_records=0),
+                                    quick=True)
+    m = chapter.run(settings).metrics
     for q in ev.QGRBPF_READINGS:
         assert m[f"final_z_a_{q}"] == m[f"final_z_a_{q}{ev.NO_THRESHOLD}"]
         assert m[f"mc_threshold_effect_{q}_low"] == m[f"mc_threshold_effect_{q}_high"] == 0.0
-    p["weight_threshold"] = 0.5                      # a threshold that bites changes the run
-    m = chapter.run(quick=True, **p).metrics
+    biting = settings.replace(weight_threshold=0.5)  # a threshold that bites changes the run
+    m = chapter.run(biting).metrics
     assert m["final_z_a_qgrbpf"] != m["final_z_a_qgrbpf_nothreshold"]
 
 
 def test_eq10_reading_is_checked():
     with pytest.raises(chapter.ParameterError, match="eq10_reading"):
-        chapter.run(quick=True, **chapter.SPEC.resolve(dict(eq10_reading="literal"), True))
+        chapter.run(chapter.SPEC.resolve(dict(eq10_reading="literal"), True))

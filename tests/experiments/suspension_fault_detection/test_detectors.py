@@ -15,21 +15,21 @@ from railpaper.experiments.suspension_fault_detection import experiment as chapt
 from railpaper.experiments.suspension_fault_detection.spec import SPEC
 from railpaper.models import lateral_16state as L
 
-PARAMS = SPEC.resolve({}, True)
+SETTINGS = SPEC.resolve({}, True)
 
 
 @pytest.fixture(scope="module")
 def setup():
     fixed, theta = chapter.vehicle()
-    catalogue, settings = faults.catalogue()
-    return fixed, theta, catalogue, settings
+    catalogue, fault_settings = faults.catalogue()
+    return fixed, theta, catalogue, fault_settings
 
 
 def _record(setup, fault, speed, seed=2, tau=1.1):
-    fixed, theta, catalogue, settings = setup
-    rec = records.simulate_faulted(PARAMS, settings, fixed, theta,
+    fixed, theta, catalogue, fault_settings = setup
+    rec = records.simulate_faulted(SETTINGS, fault_settings, fixed, theta,
                                    None if fault is None else catalogue[fault], tau, speed, seed)
-    system = chapter.filter_system(records.record_parameters(PARAMS, speed), fixed, theta,
+    system = chapter.filter_system(records.record_settings(SETTINGS, speed), fixed, theta,
                                    rec.record, theta_ref=theta)
     return rec, system
 
@@ -38,7 +38,7 @@ def test_exact_posterior_equals_one_filter_per_hypothesis(setup):
     """Short record (1.3 s at 200 km/h, C_saly lost at 1.1 s), three fault times and two fault
     values: the bank's cumulative log-likelihood of each hypothesis, and the on-line
     P(fault by k), against textbook filters whose matrices switch at the hypothesis' step."""
-    fixed, theta, catalogue, settings = setup
+    fixed, theta, catalogue, fault_settings = setup
     rec, system = _record(setup, "csaly_0", 200.0)
     K = 260
     short = type(rec.record)(seed=2, y=rec.record.y[:K], u_mps=rec.record.u_mps[:K],
@@ -82,7 +82,7 @@ def test_faulted_record_equals_the_fault_free_one_until_the_fault(setup):
     rec, _ = _record(setup, "csaly_half", 200.0, tau=1.5)
     free, _ = _record(setup, None, 200.0, tau=1.5)
     first = rec.fault_step - 1                          # row of the first post-fault sample
-    assert rec.fault_step == int(round(1.5 / PARAMS["dt_s"])) + 1
+    assert rec.fault_step == int(round(1.5 / SETTINGS.dt_s)) + 1
     assert np.array_equal(rec.record.y[:first], free.record.y[:first])
     assert not np.allclose(rec.record.y[first], free.record.y[first])
     assert np.all(rec.factor[:first] == 1.0) and np.all(rec.factor[first:] == 0.5)
@@ -92,17 +92,17 @@ def test_the_measurement_switches_with_the_fault(setup):
     """At the first post-fault sample the accelerations read A(θ after) x: the noise-free
     measurement there equals H(θ after) x, not H(θ before) x (K_sy acts on the bogie's and the
     body's lateral accelerations; C_saly only on the bogie's yaw, which no channel reads)."""
-    fixed, theta, catalogue, settings = setup
-    p = records.record_parameters(PARAMS, 200.0)
-    p_clean = dict(PARAMS, noise_acc_wheelset_mps2=1e-300, noise_acc_bogie_mps2=1e-300,
-                   noise_acc_body_mps2=1e-300, noise_yawrate_radps=1e-300)
-    rec = records.simulate_faulted(p_clean, settings, fixed, theta, catalogue["ksy_70"], 1.5,
+    fixed, theta, catalogue, fault_settings = setup
+    rs = records.record_settings(SETTINGS, 200.0)
+    clean = SETTINGS.replace(noise_acc_wheelset_mps2=1e-300, noise_acc_bogie_mps2=1e-300,
+                             noise_acc_body_mps2=1e-300, noise_yawrate_radps=1e-300)
+    rec = records.simulate_faulted(clean, fault_settings, fixed, theta, catalogue["ksy_70"], 1.5,
                                    200.0, 2)
-    dq = track_velocity(p, fixed, 2)
-    sub, j = p["truth_substeps"], rec.fault_step - 1
-    thetas, starts = faults.schedule(catalogue["ksy_70"], settings, theta, j * sub,
-                                     p["n_steps"] * sub, p["dt_s"] / sub)
-    x = L.simulate_truth_schedule(fixed, thetas, starts, 200 / 3.6, p["dt_s"] / sub, dq[:-1])
+    dq = track_velocity(rs, fixed, 2)
+    sub, j = rs.truth_substeps, rec.fault_step - 1
+    thetas, starts = faults.schedule(catalogue["ksy_70"], fault_settings, theta, j * sub,
+                                     rs.n_steps * sub, rs.dt_s / sub)
+    x = L.simulate_truth_schedule(fixed, thetas, starts, 200 / 3.6, rs.dt_s / sub, dq[:-1])
     after = L.measurement_matrix(L.build_A_direct(fixed, thetas[1], 200 / 3.6))
     before = L.measurement_matrix(L.build_A_direct(fixed, theta, 200 / 3.6))
     assert np.allclose(rec.record.y[j], after @ x[(j + 1) * sub], rtol=1e-12, atol=1e-15)
@@ -111,10 +111,10 @@ def test_the_measurement_switches_with_the_fault(setup):
 
 
 def test_a_hunting_record_ends_before_flange_contact(setup):
-    fixed, theta, catalogue, settings = setup
+    fixed, theta, catalogue, fault_settings = setup
     rec, _ = _record(setup, "csaly_0", 300.0, tau=1.0)
     stable, _ = _record(setup, "csaly_0", 200.0, tau=1.0)
-    assert rec.flange_contact and rec.end_step < PARAMS["duration_s"] / PARAMS["dt_s"]
+    assert rec.flange_contact and rec.end_step < SETTINGS.duration_s / SETTINGS.dt_s
     assert not stable.flange_contact and len(stable.record.y) == stable.end_step
     assert len(rec.record.y) == rec.end_step and rec.end_step > rec.fault_step
 
@@ -155,12 +155,12 @@ def test_censored_median_is_the_order_statistic_median():
 
 
 def test_drift_schedule_ends_at_its_factor(setup):
-    fixed, theta, catalogue, settings = setup
+    fixed, theta, catalogue, fault_settings = setup
     fault = catalogue["csaly_drift"]
-    thetas, starts = faults.schedule(fault, settings, theta, 1000, 8000, 5e-4)
+    thetas, starts = faults.schedule(fault, fault_settings, theta, 1000, 8000, 5e-4)
     j = L.PARAM_NAMES.index("csaly")
     values = np.array([t[j] for t in thetas]) / theta[j]
     assert values[0] == 1.0 and values[-1] == fault.factor and np.all(np.diff(values) < 0)
-    assert starts[1] == 1000 and starts[-1] == 1000 + int(round(settings["drift_s"] / 5e-4))
+    assert starts[1] == 1000 and starts[-1] == 1000 + int(round(fault_settings["drift_s"] / 5e-4))
     t = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
-    assert np.allclose(faults.factor_at(fault, settings, t, 1.0), [1, 1, 0.75, 0.5, 0.5])
+    assert np.allclose(faults.factor_at(fault, fault_settings, t, 1.0), [1, 1, 0.75, 0.5, 0.5])
