@@ -1,0 +1,327 @@
+"""Claims as data, and the registry that makes every later change of one visible.
+
+A chapter's ``data/<chapter>/declarations.toml`` holds one ``[[claim]]`` table per claim and
+reading::
+
+    [[claim]]
+    id = "convergence_longer_with_speed"
+    claim = "convergence takes longer as the speed rises"      # in English
+    words = "the convergence time becomes longer as the speed increases"   # the paper's, quoted
+    source = "paper 001, abstract"
+    kind = "population"        # single-run | population | deterministic | design | implementation
+    word_class = "trend"       # a class of data/vocabulary.toml: it fixes the procedure
+    study = "monte_carlo"      # the per-record study whose rows decide (not for deterministic,
+                               # design and implementation rows, which read the run's metrics)
+    metrics = ["convergence_time_s_60kmh", "convergence_time_s_200kmh"]
+    direction = "increase"     # trends and comparisons: from metrics[0] to metrics[1]
+    paper_value = [55.0]       # single-run and deterministic rows: the paper's numbers
+    resolution = [5.0]         # ... and their printed resolution
+    horizon = "step 300"       # single-run rows: where the figure's numbers are read
+    central = true             # from the abstract or conclusion
+    reading = "default"        # optional: the reading of the paper this row takes
+
+and nothing else: no threshold, margin or case of its own (:data:`FORBIDDEN_KEYS`).  Each row is
+decided by :mod:`railpaper.rulebook` from its class's procedure and the vocabulary's numbers.
+
+The registry (``data/claims_registry.json``) holds each row's fingerprint — a hash of the
+canonical parsed declaration, the vocabulary entries it uses, the procedures' version and its
+registered sample size — with the date it was registered.  :func:`check_registry` reports every
+row whose fingerprint no longer matches (``railpaper check`` fails on it); :func:`register`
+records a new fingerprint and keeps the previous declaration in the row's history, so the ledger
+can show the old verdict beside the new one and the intro counts revisions from the registry.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from railpaper.data import DataError
+from railpaper.paths import DATA_DIR
+import pandas as pd
+
+from railpaper import rulebook
+from railpaper.rulebook import (
+    DIRECTIONS,
+    Decision,
+    Vocabulary,
+    continuous_size,
+    rate_size,
+    single_run_size,
+)
+
+KINDS = ("single-run", "population", "deterministic", "design", "implementation")
+#: The procedures each kind may use (a population claim is a rate, a change or an equivalence).
+KIND_PROCEDURES = {"single-run": ("single-run",),
+                   "population": ("population-rate", "paired-change", "equivalence"),
+                   "deterministic": ("deterministic",), "design": ("design",),
+                   "implementation": ("implementation",)}
+REQUIRED_KEYS = ("id", "claim", "words", "source", "kind", "word_class", "metrics", "central")
+OPTIONAL_KEYS = ("study", "direction", "paper_value", "resolution", "horizon", "reading",
+                 "paper_rate_hz", "note")
+#: Keys of the old per-row rules that a declaration may not carry: its thresholds come from
+#: the vocabulary, its procedure from its class.
+FORBIDDEN_KEYS = ("threshold", "margin", "cases", "otherwise", "rule", "min_samples", "deciding",
+                  "when", "tolerance", "alpha", "epsilon")
+REGISTRY_FILE = DATA_DIR / "claims_registry.json"
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """One claim under one reading, as data (see the module docstring for the fields)."""
+
+    chapter: str
+    id: str
+    claim: str
+    words: str
+    source: str
+    kind: str
+    word_class: str
+    metrics: tuple[str, ...]
+    central: bool
+    study: str = ""
+    direction: str = ""
+    paper_value: tuple[float, ...] = ()
+    resolution: tuple[float, ...] = ()
+    horizon: str = ""
+    reading: str = ""
+    paper_rate_hz: float | None = None
+    note: str = ""
+    procedure: str = field(default="", compare=False)
+
+    @property
+    def key(self) -> str:
+        """``chapter/id``: the row's name in the registry."""
+        return f"{self.chapter}/{self.id}"
+
+    def canonical(self) -> dict[str, Any]:
+        """The parsed declaration as plain data, in a fixed order (what the fingerprint hashes)."""
+        data = asdict(self)
+        data.pop("procedure")
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in sorted(data.items())}
+
+
+def parse(chapter: str, table: dict[str, Any], vocabulary: Vocabulary) -> Declaration:
+    """A declaration from its TOML table, checked: one-line :class:`DataError` naming the row."""
+    where = f"{chapter} claim {table.get('id', '?')!r}"
+    bad = sorted(set(table) & set(FORBIDDEN_KEYS))
+    if bad:
+        raise DataError(f"{where}: {', '.join(bad)} belong to the rulebook and the vocabulary, "
+                        "not to a claim")
+    unknown = sorted(set(table) - set(REQUIRED_KEYS) - set(OPTIONAL_KEYS))
+    if unknown:
+        raise DataError(f"{where}: unknown keys {', '.join(unknown)}")
+    missing = [k for k in REQUIRED_KEYS if k not in table]
+    if missing:
+        raise DataError(f"{where}: missing {', '.join(missing)}")
+    if table["kind"] not in KINDS:
+        raise DataError(f"{where}: kind {table['kind']!r} is not one of {', '.join(KINDS)}")
+    try:
+        entry = vocabulary.entry(table["word_class"])
+    except KeyError as exc:
+        raise DataError(f"{where}: {exc.args[0]}") from None
+    procedure = entry["procedure"]
+    if procedure not in KIND_PROCEDURES[table["kind"]]:
+        raise DataError(f"{where}: word class {table['word_class']!r} (procedure {procedure}) "
+                        f"does not decide a {table['kind']} claim")
+    metrics = tuple(table["metrics"]) if isinstance(table["metrics"], list) else (table["metrics"],)
+    values = dict(table, metrics=metrics,
+                  paper_value=tuple(float(v) for v in _as_list(table.get("paper_value", []))),
+                  resolution=tuple(float(v) for v in _as_list(table.get("resolution", []))))
+    declaration = Declaration(chapter=chapter, procedure=procedure, **values)
+    _check_shape(declaration, where)
+    return declaration
+
+
+def _as_list(value) -> list:
+    return value if isinstance(value, list) else [value]
+
+
+def _check_shape(d: Declaration, where: str) -> None:
+    """What each procedure needs of a row."""
+    needs_study = d.procedure in ("single-run", "population-rate", "paired-change", "equivalence")
+    if needs_study and not d.study:
+        raise DataError(f"{where}: a {d.procedure} row names the study whose records decide it")
+    if d.procedure == "paired-change":
+        if len(d.metrics) != 2 or d.direction not in DIRECTIONS:
+            raise DataError(f"{where}: a paired change needs metrics [baseline, other] and "
+                            f"direction {' or '.join(DIRECTIONS)}")
+    if d.procedure == "population-rate" and len(d.metrics) != 1:
+        raise DataError(f"{where}: a rate reads one per-record yes/no column")
+    if d.procedure == "equivalence" and len(d.metrics) not in (1, 2):
+        raise DataError(f"{where}: an equivalence reads deviations, or [baseline, other]")
+    if d.procedure in ("single-run", "deterministic"):
+        if not d.paper_value or len(d.paper_value) != len(d.metrics):
+            raise DataError(f"{where}: paper_value needs one number per metric")
+        if d.resolution and len(d.resolution) != len(d.metrics):
+            raise DataError(f"{where}: resolution needs one number per metric")
+    if d.procedure == "single-run" and not d.horizon:
+        raise DataError(f"{where}: a single-run row declares its horizon (the paper's, or the "
+                        "vocabulary's default)")
+
+
+def load_declarations(chapter: str, vocabulary: Vocabulary | None = None,
+                      path: Path | None = None) -> list[Declaration]:
+    """The chapter's declarations (empty where it has no declarations file yet)."""
+    path = path or DATA_DIR / chapter / "declarations.toml"
+    if not path.exists():
+        return []
+    vocabulary = vocabulary or Vocabulary.load()
+    rows = [parse(chapter, table, vocabulary) for table in tomllib.loads(path.read_text())
+            .get("claim", [])]
+    seen = set()
+    for row in rows:
+        if row.id in seen:
+            raise DataError(f"{path}: claim id {row.id!r} twice")
+        seen.add(row.id)
+    return rows
+
+
+def vocabulary_entries(declaration: Declaration, vocabulary: Vocabulary) -> dict[str, Any]:
+    """The vocabulary a row's verdict reads: its class's entry and the policy."""
+    return {"class": vocabulary.entry(declaration.word_class), "policy": vocabulary.policy}
+
+
+def registered_size(declaration: Declaration, vocabulary: Vocabulary,
+                    pilot_sigma: float | None = None) -> int | None:
+    """The sample size by power, fixed before the deciding run: rates at the word's threshold
+    (σ² = τ(1 − τ)) and the policy's rate margin; single-run rows at α and the policy's
+    resolution; paired changes and equivalences from a pilot's per-record σ of the relative
+    effect (None until one is given); None for rows that take no sample."""
+    policy, entry = vocabulary.policy, vocabulary.entry(declaration.word_class)
+    level, power = policy["level"], policy["power"]
+    if declaration.procedure == "population-rate":
+        return rate_size(entry["threshold"], policy["rate_margin"], level, power)
+    if declaration.procedure == "single-run":
+        return single_run_size(policy["alpha_single_run"], policy["single_run_resolution"],
+                               level, power)
+    if declaration.procedure in ("paired-change", "equivalence"):
+        return None if pilot_sigma is None else continuous_size(pilot_sigma, entry["margin"],
+                                                                level, power)
+    return None
+
+
+def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | None) -> str:
+    """SHA-256 (first 16 hex digits) of the canonical declaration, the vocabulary entries it
+    reads, the procedures' version and the registered size."""
+    payload = {"declaration": declaration.canonical(),
+               "vocabulary": vocabulary_entries(declaration, vocabulary),
+               "procedure_version": vocabulary.policy["procedure_version"], "size": size}
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def load_registry(path: Path = REGISTRY_FILE) -> dict[str, dict[str, Any]]:
+    """``{chapter/id: {fingerprint, size, date, declaration, history: [...]}}``."""
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def check_registry(declarations: list[Declaration], vocabulary: Vocabulary,
+                   registry: dict[str, dict[str, Any]],
+                   registry_name: str = "data/claims_registry.json") -> list[str]:
+    """One line per problem: a row not registered, or whose fingerprint no longer matches (its
+    declaration, a vocabulary entry it reads or the procedures changed since it was
+    registered)."""
+    problems = []
+    for d in declarations:
+        entry = registry.get(d.key)
+        if entry is None:
+            problems.append(f"{d.key}: not registered in {registry_name} (railpaper register)")
+            continue
+        now = fingerprint(d, vocabulary, entry.get("size"))
+        if now != entry["fingerprint"]:
+            problems.append(f"{d.key}: its declaration or the vocabulary it reads changed since "
+                            f"{entry['date']} (fingerprint {entry['fingerprint']} in "
+                            f"{registry_name}, now {now}): a revision; register it to keep the "
+                            "old verdict beside the new")
+    return problems
+
+
+def register(declarations: list[Declaration], vocabulary: Vocabulary,
+             registry: dict[str, dict[str, Any]], sizes: dict[str, int | None], date: str
+             ) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """A new registry with every row's current fingerprint and size (``sizes`` by key): an
+    unchanged row keeps its entry; a changed one moves its previous entry to ``history`` and is
+    marked a revision.  Returns the registry and the keys revised."""
+    new, revised = dict(registry), []
+    for d in declarations:
+        size = sizes.get(d.key)
+        current = fingerprint(d, vocabulary, size)
+        old = registry.get(d.key)
+        if old is not None and old["fingerprint"] == current:
+            continue
+        history = list(old.get("history", [])) if old else []
+        if old is not None:
+            history.append({k: old[k] for k in ("fingerprint", "size", "date", "declaration")})
+            revised.append(d.key)
+        new[d.key] = {"fingerprint": current, "size": size, "date": date,
+                      "declaration": d.canonical(), "history": history}
+    return new, revised
+
+
+def write_registry(registry: dict[str, dict[str, Any]], path: Path = REGISTRY_FILE) -> Path:
+    path.write_text(json.dumps(registry, indent=1, sort_keys=True, ensure_ascii=False) + "\n")
+    return path
+
+
+def revisions(registry: dict[str, dict[str, Any]]) -> int:
+    """Rows registered more than once: the intro's revision count."""
+    return sum(1 for entry in registry.values() if entry.get("history"))
+
+
+def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
+           metrics: dict[str, Any], size: int | None = None) -> Decision:
+    """The row's verdict by its class's procedure: from the per-record ``rows`` of its study
+    (single-run, rates, changes, equivalences) or the run's ``metrics`` (deterministic, design,
+    implementation).  A sampled row with fewer records than its registered ``size`` is
+    *undecided* and says how many it needs."""
+    d, policy = declaration, vocabulary.policy
+    entry, level = vocabulary.entry(d.word_class), policy["level"]
+    if d.procedure in ("single-run", "population-rate", "paired-change", "equivalence"):
+        if rows is None or len(rows) == 0:
+            return Decision("undecided", f"no records of study {d.study!r}")
+        missing = [m for m in d.metrics if m not in rows.columns]
+        if missing:
+            raise DataError(f"{d.key}: study {d.study!r} has no column {missing[0]!r}")
+        if size is not None and len(rows) < size:
+            return Decision("undecided", f"{len(rows)} records of the {size} registered for it "
+                            "(sizes by power, before the deciding run)", n=len(rows))
+    if d.procedure == "single-run":
+        resolution = d.resolution or (0.0,) * len(d.metrics)
+        return rulebook.single_run(rows[list(d.metrics)].to_numpy(dtype=float), d.paper_value,
+                                   resolution, policy["alpha_single_run"], level)
+    if d.procedure == "population-rate":
+        hits = rows[d.metrics[0]].astype(bool)
+        return rulebook.population_rate(int(hits.sum()), len(hits), entry["threshold"],
+                                        entry.get("direction", "at least"), level)
+    if d.procedure == "paired-change":
+        return rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
+                                      rows[d.metrics[1]].to_numpy(float), d.direction,
+                                      entry["margin"], level)
+    if d.procedure == "equivalence":
+        if len(d.metrics) == 1:
+            return rulebook.equivalence(rows[d.metrics[0]].to_numpy(float), entry["margin"], level)
+        return rulebook.equivalence(margin=entry["margin"], level=level,
+                                    baseline=rows[d.metrics[0]].to_numpy(float),
+                                    other=rows[d.metrics[1]].to_numpy(float))
+    values = [metrics.get(m) for m in d.metrics]
+    if d.procedure == "implementation":
+        return rulebook.implementation(values[0], d.paper_rate_hz)
+    if any(v is None for v in values):
+        return Decision("undecided", f"the run has no metric {d.metrics[values.index(None)]!r}")
+    if d.procedure == "design":
+        return rulebook.design(all(bool(v) for v in values), d.claim)
+    resolution = d.resolution or (0.0,) * len(d.metrics)
+    decisions = [rulebook.deterministic(v, p, r) for v, p, r in
+                 zip(values, d.paper_value, resolution)]
+    differing = [x for x in decisions if x.verdict == "differs"]
+    return differing[0] if differing else decisions[0]
+
+
+__all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
+           "decide", "fingerprint", "load_declarations", "load_registry", "parse", "register",
+           "registered_size", "revisions", "write_registry"]

@@ -1,0 +1,139 @@
+"""Claims as data: parsing refuses thresholds of a row's own, the fingerprint catches every
+change a verdict could feel and nothing else, the registry keeps the previous declaration, and
+each procedure decides a hand-made table."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from railpaper.data import DataError
+from railpaper.pipeline import declarations
+from railpaper.pipeline.declarations import (
+    check_registry,
+    decide,
+    fingerprint,
+    parse,
+    register,
+    registered_size,
+    revisions,
+)
+from railpaper.rulebook import Vocabulary
+
+VOCABULARY = Vocabulary.load()
+TREND = {"id": "longer_with_speed", "claim": "convergence takes longer as the speed rises",
+         "words": "the convergence time becomes longer as the speed increases",
+         "source": "paper 001, abstract", "kind": "population", "word_class": "trend",
+         "study": "monte_carlo", "metrics": ["time_s_60kmh", "time_s_200kmh"],
+         "direction": "increase", "central": True}
+
+
+def declaration(**changes):
+    return parse("demo", dict(TREND, **changes), VOCABULARY)
+
+
+def test_a_row_carries_no_threshold_of_its_own():
+    with pytest.raises(DataError, match="margin belong to the rulebook"):
+        declaration(margin=0.2)
+    with pytest.raises(DataError, match="cases, rule belong"):
+        declaration(rule="reproduced if ...", cases=[])
+    with pytest.raises(DataError, match="unknown keys colour"):
+        declaration(colour="red")
+
+
+def test_the_class_must_decide_the_kind_and_the_row_must_fit_the_procedure():
+    with pytest.raises(DataError, match="does not decide a single-run claim"):
+        declaration(kind="single-run")
+    with pytest.raises(DataError, match="no word class 'often'"):
+        declaration(word_class="often")
+    with pytest.raises(DataError, match="direction increase or decrease"):
+        declaration(direction="up")
+    with pytest.raises(DataError, match="names the study"):
+        declaration(study="")
+    with pytest.raises(DataError, match="declares its horizon"):
+        declaration(kind="single-run", word_class="value", metrics=["a"], paper_value=[1.0])
+
+
+def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size():
+    d = declaration()
+    base = fingerprint(d, VOCABULARY, 785)
+    assert fingerprint(declaration(), VOCABULARY, 785) == base          # deterministic
+    assert fingerprint(declaration(claim="convergence is slower at speed"), VOCABULARY, 785) != base
+    assert fingerprint(d, VOCABULARY, 800) != base
+    wider = copy.deepcopy(VOCABULARY)
+    wider.classes["trend"]["margin"] = 0.2
+    assert fingerprint(d, wider, 785) != base
+    other_class = copy.deepcopy(VOCABULARY)
+    other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
+    assert fingerprint(d, other_class, 785) == base
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=2))
+    assert fingerprint(d, newer, 785) != base
+
+
+def test_registry_catches_a_change_and_keeps_the_old_declaration():
+    d = declaration()
+    registry, revised = register([d], VOCABULARY, {}, {d.key: 785}, "2026-12-06")
+    assert revised == [] and check_registry([d], VOCABULARY, registry) == []
+    changed = declaration(direction="decrease")
+    problems = check_registry([changed], VOCABULARY, registry)
+    assert len(problems) == 1 and "changed since 2026-12-06" in problems[0]
+    assert "data/claims_registry.json" in problems[0]
+    again, revised = register([changed], VOCABULARY, registry, {d.key: 785}, "2026-12-07")
+    assert revised == ["demo/longer_with_speed"]
+    assert again[d.key]["history"][0]["declaration"]["direction"] == "increase"
+    assert check_registry([changed], VOCABULARY, again) == []
+    assert revisions(again) == 1 and revisions(registry) == 0
+    assert "not registered" in check_registry([declaration(id="new")], VOCABULARY, again)[0]
+
+
+def test_sizes_by_power_from_the_vocabulary():
+    rate = declaration(word_class="absolute", metrics=["converged"], direction="")
+    assert registered_size(rate, VOCABULARY) == 150    # ceil(2.8016² · 0.95 · 0.05 / 0.05²) = ceil(149.1)
+    majority = declaration(word_class="majority", metrics=["converged"], direction="")
+    assert registered_size(majority, VOCABULARY) == 785
+    assert registered_size(declaration(), VOCABULARY) is None       # needs a pilot's σ
+    assert registered_size(declaration(), VOCABULARY, pilot_sigma=0.5) == 197
+
+
+def test_decide_reads_the_study_rows():
+    rng = np.random.default_rng(0)
+    base = 1.0 + 0.1 * rng.standard_normal(200)
+    rows = pd.DataFrame({"time_s_60kmh": base, "time_s_200kmh": base * 1.3,
+                         "converged": rng.random(200) < 0.99})
+    assert decide(declaration(), VOCABULARY, rows, {}).verdict == "reproduced"
+    assert decide(declaration(direction="decrease"), VOCABULARY, rows, {}).verdict == "differs"
+    small = decide(declaration(), VOCABULARY, rows.iloc[:50], {}, size=197)
+    assert small.verdict == "undecided" and "50 records of the 197 registered" in small.reason
+    rate = declaration(word_class="absolute", metrics=["converged"], direction="")
+    assert decide(rate, VOCABULARY, rows, {}).statistic == rows.converged.mean()
+    with pytest.raises(DataError, match="has no column 'nope'"):
+        decide(declaration(metrics=["nope", "time_s_60kmh"]), VOCABULARY, rows, {})
+
+
+def test_decide_reads_the_run_metrics_for_exact_design_and_speed_rows():
+    exact = declaration(kind="deterministic", word_class="exact", metrics=["rank"],
+                        paper_value=[4.0], study="", direction="")
+    assert decide(exact, VOCABULARY, None, {"rank": 4}).verdict == "reproduced"
+    assert decide(exact, VOCABULARY, None, {"rank": 3}).verdict == "differs"
+    assert decide(exact, VOCABULARY, None, {}).verdict == "undecided"
+    fast = declaration(kind="implementation", word_class="real-time", metrics=["steps_per_s"],
+                       study="", direction="")
+    assert decide(fast, VOCABULARY, None, {"steps_per_s": 900.0}).verdict == "not testable"
+    timed = declaration(kind="implementation", word_class="real-time", metrics=["steps_per_s"],
+                        study="", direction="", paper_rate_hz=1000.0)
+    assert decide(timed, VOCABULARY, None, {"steps_per_s": 900.0}).verdict == "differs"
+
+
+def test_declarations_file_round_trip(tmp_path):
+    path = tmp_path / "declarations.toml"
+    path.write_text('[[claim]]\nid = "a"\nclaim = "c"\nwords = "w"\nsource = "s"\n'
+                    'kind = "design"\nword_class = "design"\nmetrics = ["poles_placed"]\n'
+                    'central = false\n\n[[claim]]\nid = "a"\nclaim = "c"\nwords = "w"\n'
+                    'source = "s"\nkind = "design"\nword_class = "design"\n'
+                    'metrics = ["poles_placed"]\ncentral = false\n')
+    with pytest.raises(DataError, match="claim id 'a' twice"):
+        declarations.load_declarations("demo", VOCABULARY, path)
