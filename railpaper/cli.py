@@ -87,14 +87,16 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     from railpaper.pipeline.chapters import chapter_spec, resolve_parameters, run_chapter
+    from railpaper.pipeline.evidence_store import records_on
     overrides = {}
     spec = chapter_spec(args.chapter)
     for name, value in args.parameter or []:
         spec.parameter(name)                                  # unknown name: one line, exit 2
         overrides[name] = _parse_value(value)
     resolve_parameters(args.chapter, overrides, args.quick)   # wrong type / value: before a kernel
-    out = run_chapter(args.chapter, overrides, args.quick, args.out,
-                      progress=sys.stderr.isatty())           # no progress bar in logs
+    with records_on(args.workers, args.scheduler, args.store):
+        out = run_chapter(args.chapter, overrides, args.quick, args.out,
+                          progress=sys.stderr.isatty())       # no progress bar in logs
     print(f"railpaper: chapter {args.chapter} written to {out}")
     return 0
 
@@ -171,9 +173,11 @@ def cmd_bands(args) -> int:
 
 def cmd_build(args) -> int:
     from railpaper.pipeline.book import build_book
+    from railpaper.pipeline.evidence_store import records_on
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
-    html = build_book(args.quick, args.book_dir, progress=sys.stderr.isatty(), jobs=args.jobs)
+    with records_on(args.workers, args.scheduler, args.store):
+        html = build_book(args.quick, args.book_dir, progress=sys.stderr.isatty(), jobs=args.jobs)
     print(f"railpaper: book built at {html / 'index.html'}")
     return 0
 
@@ -216,6 +220,19 @@ def cmd_track(args) -> int:
     return 0
 
 
+def _records_arguments(p) -> None:
+    """``--workers``, ``--scheduler`` and ``--store`` of ``run`` and ``build``."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="K",
+                       help="compute the Monte Carlo records on K local single-threaded worker "
+                       "processes (one dask LocalCluster, shared by the chapters of a build)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="compute them on an existing dask cluster, e.g. tcp://host:8786")
+    p.add_argument("--store", type=Path, metavar="DIR",
+                   help="keep every record's row in this evidence store and reuse the rows it "
+                   "holds (only missing seeds are computed)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railpaper", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -229,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="set a chapter parameter; VALUE is YAML (e.g. -p speeds_kmh '[80, 140]')")
     p.add_argument("--quick", action="store_true", help="the chapter's quick sizes (CI)")
     p.add_argument("--out", type=Path, help="output directory (default: the book's chapter folder)")
+    _records_arguments(p)
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("check", help="metrics.json against the CI tolerances")
@@ -278,11 +296,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--book-dir", type=Path, help=argparse.SUPPRESS)
     p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                    help="chapters run at once, one core each (default: 2, or 1 on one core)")
+    _records_arguments(p)
     p.set_defaults(func=cmd_build)
 
     p = sub.add_parser("bench", help="RBPF engine benchmark on paper 003's lateral model")
     p.add_argument("--quick", action="store_true",
-                   help="fewer steps and alternations, same N (about 2 minutes)")
+                   help="fewer steps and alternations, same N (about half a minute)")
     p.add_argument("--out", type=Path, help="write the results as JSON (and a PNG plot beside)")
     p.set_defaults(func=cmd_bench)
 

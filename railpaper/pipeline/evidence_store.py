@@ -27,8 +27,11 @@ True
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import hashlib
 import json
+import os
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +51,7 @@ from railpaper.experiments.records import (
 )
 from railpaper.paths import REPO_DIR
 from railpaper.pipeline.chapters import PipelineError
+from railpaper.pipeline.sweep import close_client, make_client
 
 #: Rows of another commit recomputed before the store's rows are reused.
 SPOT_CHECK_RECORDS = 3
@@ -227,5 +231,81 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
     return record_map
 
 
-__all__ = ["EvidenceStore", "EvidenceStoreError", "SPOT_CHECK_RECORDS", "current_commit",
-           "key_digest", "record_key", "stored_map"]
+
+
+#: Environment variables through which ``railpaper run`` and ``railpaper build`` hand a chapter
+#: notebook's kernel where its records run and are kept (:func:`notebook_record_map`).
+WORKERS_VARIABLE = "RAILPAPER_WORKERS"
+SCHEDULER_VARIABLE = "RAILPAPER_SCHEDULER"
+STORE_VARIABLE = "RAILPAPER_EVIDENCE_STORE"
+
+_CLIENTS: dict[tuple, Any] = {}
+
+
+def record_map_for(workers: int | None = None, scheduler: str | None = None,
+                   store: str | Path | None = None) -> RecordMap:
+    """The record map of a run: in this process without ``workers`` or ``scheduler`` (today's
+    behaviour), else on a dask ``LocalCluster`` of ``workers`` single-threaded processes or on
+    the cluster at ``scheduler``; rows kept in and reused from ``store`` when given.  The client
+    is made once per process and closed at its exit."""
+    client = None
+    if workers or scheduler:
+        key = (workers, scheduler)
+        if key not in _CLIENTS:
+            _CLIENTS[key] = make_client(scheduler, workers)
+            atexit.register(close_client, *_CLIENTS[key])
+        client = _CLIENTS[key][0]
+    return stored_map(EvidenceStore(store) if store else None, client=client)
+
+
+def notebook_record_map() -> RecordMap:
+    """:func:`record_map_for` as the pipeline asked for it (:data:`WORKERS_VARIABLE`,
+    :data:`SCHEDULER_VARIABLE`, :data:`STORE_VARIABLE`; none set: in the notebook's process,
+    no store)."""
+    workers = int(os.environ.get(WORKERS_VARIABLE, "0")) or None
+    return record_map_for(workers, os.environ.get(SCHEDULER_VARIABLE) or None,
+                          os.environ.get(STORE_VARIABLE) or None)
+
+
+@contextlib.contextmanager
+def records_on(workers: int | None = None, scheduler: str | None = None,
+               store: str | Path | None = None):
+    """Where the chapters run by ``railpaper run`` / ``build`` compute their records, for the
+    duration of the block: with ``workers``, one dask ``LocalCluster`` of that many
+    single-threaded processes made here and shared by every chapter (``build --jobs 2`` runs two
+    chapters whose records share the same K workers); with ``scheduler``, that cluster; with
+    ``store``, rows kept and reused there.  The chapters' notebook kernels inherit the address
+    and the store through :data:`SCHEDULER_VARIABLE` and :data:`STORE_VARIABLE`; without any of
+    them nothing changes (records in each chapter's own process).  Yields the scheduler address
+    (None without one)."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    if workers and scheduler:
+        raise ValueError("give --workers (a local cluster) or --scheduler (yours), not both")
+    saved = {name: os.environ.get(name) for name in (SCHEDULER_VARIABLE, STORE_VARIABLE,
+                                                     WORKERS_VARIABLE)}
+    client = cluster = None
+    try:
+        if workers:
+            client, cluster = make_client(None, workers)
+            scheduler = cluster.scheduler_address
+        elif scheduler:
+            client, cluster = make_client(scheduler, None)    # reachable? one line if not
+        if scheduler:
+            os.environ[SCHEDULER_VARIABLE] = scheduler
+        if store:
+            os.environ[STORE_VARIABLE] = str(Path(store).resolve())
+        yield scheduler
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+        if client is not None:
+            close_client(client, cluster)
+
+
+__all__ = ["EvidenceStore", "EvidenceStoreError", "SCHEDULER_VARIABLE", "SPOT_CHECK_RECORDS",
+           "STORE_VARIABLE", "WORKERS_VARIABLE", "current_commit", "key_digest",
+           "notebook_record_map", "record_key", "record_map_for", "records_on", "stored_map"]

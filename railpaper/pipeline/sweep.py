@@ -162,7 +162,7 @@ def _samples(grid: dict[str, list], fixed: dict[str, Any], seeds: list[int]):
             yield point, dict(fixed, **point)
 
 
-def _client(scheduler: str | None, workers: int | None):
+def make_client(scheduler: str | None, workers: int | None):
     """A dask Client: of a new LocalCluster (returned too, to close) or of ``scheduler``."""
     from distributed import Client, LocalCluster
     if scheduler:
@@ -190,7 +190,7 @@ def _quiet_worker_logs() -> None:
     logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
-def _close_quietly(client, cluster) -> None:
+def close_client(client, cluster) -> None:
     """Close the client and our LocalCluster with only errors of dask's loggers in this process:
     after an interrupt a worker busy with a cancelled sample takes its nanny (here) more than 4 s
     to stop, and the nanny's 'still alive after 4.0 seconds, killing' warning is that
@@ -316,7 +316,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     rows = existing[(existing["sample"].isin(done)) | ~existing["sample"].isin(keys)] \
         .to_dict("records") if len(existing) else []
     todo = [s for s in samples if s[0] not in done]
-    client, cluster = _client(scheduler, workers) if todo else (None, None)
+    client, cluster = make_client(scheduler, workers) if todo else (None, None)
     try:
         out.mkdir(parents=True, exist_ok=True)
         _record(out, chapter, quick, grid, fixed, seeds, scheduler, workers)
@@ -337,7 +337,7 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
             write_csv_atomic(pd.DataFrame(rows), out / "results.csv")
             meter.update(outcome["status"])
     finally:
-        _close_quietly(client, cluster)
+        close_client(client, cluster)
     order = {key: i for i, (key, _, _) in enumerate(samples)}
     everything = pd.DataFrame(rows)                          # this sweep's rows in grid order first
     everything = everything.iloc[np.argsort(everything["sample"].map(order).fillna(len(order))

@@ -147,3 +147,36 @@ def test_extreme_floats_round_trip():
     frame = pd.DataFrame({"seed": np.arange(len(values)), "x_m": values})
     again = normalised(frame)
     assert np.array_equal(frame.x_m.to_numpy().view(np.int64), again.x_m.to_numpy().view(np.int64))
+
+
+def test_records_on_hands_the_kernels_a_cluster_and_a_store_then_restores(tmp_path, monkeypatch):
+    import os
+
+    from distributed import Client
+
+    from railpaper.pipeline import evidence_store
+    monkeypatch.delenv(evidence_store.SCHEDULER_VARIABLE, raising=False)
+    monkeypatch.delenv(evidence_store.STORE_VARIABLE, raising=False)
+    with evidence_store.records_on(workers=1, store=tmp_path) as address:
+        assert os.environ[evidence_store.SCHEDULER_VARIABLE] == address
+        assert os.environ[evidence_store.STORE_VARIABLE] == str(tmp_path.resolve())
+        with Client(address) as client:                 # what a notebook kernel connects to
+            assert len(client.scheduler_info()["workers"]) == 1
+    assert evidence_store.SCHEDULER_VARIABLE not in os.environ
+    assert evidence_store.STORE_VARIABLE not in os.environ
+    with evidence_store.records_on() as address:        # nothing asked: nothing changes
+        assert address is None and evidence_store.SCHEDULER_VARIABLE not in os.environ
+    with pytest.raises(ValueError, match="not both"):
+        with evidence_store.records_on(workers=2, scheduler="tcp://127.0.0.1:1"):
+            pass
+    with pytest.raises(ValueError, match="--workers must be >= 1"):
+        with evidence_store.records_on(workers=0):
+            pass
+
+
+def test_an_unreachable_scheduler_is_one_line():
+    from railpaper.pipeline.chapters import PipelineError
+    from railpaper.pipeline.evidence_store import records_on
+    with pytest.raises(PipelineError, match="cannot reach dask scheduler 'tcp://127.0.0.1:9'"):
+        with records_on(scheduler="tcp://127.0.0.1:9"):
+            pass
