@@ -67,9 +67,10 @@ def test_compute_bands_runs_disjoint_batches_and_resumes(monkeypatch, tmp_path):
         calls.append(overrides["seed"])
         out.mkdir(parents=True)
         from railpaper.pipeline.chapters import chapter_spec
-        params = chapter_spec(name).resolve(overrides, quick)
+        settings = chapter_spec(name).resolve(overrides, quick)
         metrics = {"x": float(overrides["seed"]) / 1000, "n": 20}
-        (out / "metrics.json").write_text(json.dumps({"parameters": params, "metrics": metrics}))
+        (out / "metrics.json").write_text(json.dumps({"parameters": settings.as_dict(),
+                                                      "metrics": metrics}))
 
     monkeypatch.setattr(bands_module, "run_chapter", fake_run)
     out = compute_bands(chapter, True, batches=4, work_dir=tmp_path, metrics=["x", "n"])

@@ -14,9 +14,9 @@ CHAPTER = "reduced-order-observer"
 
 def write_run(directory, seed, metrics):
     directory.mkdir()
-    params = chapter_spec(CHAPTER).resolve({"seed": seed}, True)
+    settings = chapter_spec(CHAPTER).resolve({"seed": seed}, True)
     (directory / "metrics.json").write_text(json.dumps(
-        {"chapter": CHAPTER, "parameters": params, "quick": True, "metrics": metrics}))
+        {"chapter": CHAPTER, "parameters": settings.as_dict(), "quick": True, "metrics": metrics}))
     return directory
 
 

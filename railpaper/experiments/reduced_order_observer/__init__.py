@@ -2,12 +2,13 @@
 reduced-order observer of the wheelset's vertical states, wheel–rail force by linearised Hertz
 contact.
 
-``SPEC`` (the chapter's parameters), ``validate(params)`` and ``run(quick=False, progress=None,
-**params)`` are what the pipeline needs; the modules of the package are the chapter's parts
-(``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
+``SPEC`` (the chapter's parameters), ``Settings`` (their typed, frozen values),
+``validate(settings)`` and ``run(settings, *, progress=None)`` are what the pipeline needs; the
+modules of the package are the chapter's parts (``experiment`` is the whole computation,
+``figures`` and ``tables`` draw from its result).
 """
 
 from railpaper.experiments.reduced_order_observer.experiment import run, validate
-from railpaper.experiments.reduced_order_observer.spec import SPEC
+from railpaper.experiments.reduced_order_observer.spec import SPEC, Settings
 
-__all__ = ["SPEC", "run", "validate"]
+__all__ = ["SPEC", "Settings", "run", "validate"]

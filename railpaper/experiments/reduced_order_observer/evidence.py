@@ -43,7 +43,7 @@ from railpaper.experiments.reduced_order_observer.record import (
     noise_draws,
     profile,
 )
-from railpaper.experiments.reduced_order_observer.spec import READINGS
+from railpaper.experiments.reduced_order_observer.spec import READINGS, Settings
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settling_time_s
 
@@ -66,24 +66,24 @@ def _rms(x, axis=0):
     return np.sqrt(np.mean(x**2, axis=axis))
 
 
-def _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference):
+def _reading_samples(reading, settings: Settings, t_s, q, noise_y, noise_q, reference):
     """Per-sample quantities (dict of (N,) arrays) of one reading; ``reference[i]``: column of
     the same seed at the noise-reference speed, whose noise σ and standard-normal draws the
     ``_fixed_noise`` samples use at every speed (common random numbers: across speeds only the
     signal changes, not the noise)."""
     vehicle = sw.load_parameters(p0_basis=reading)
     A, B = sw.state_space(vehicle)
-    hold = "zoh" if params["observer_form"] == "paper" else "foh"
-    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], hold)
-    y, z_w = _plant_batch(vehicle, params["plant"], params["dt_s"], q)
+    hold = "zoh" if settings.observer_form == "paper" else "foh"
+    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, hold)
+    y, z_w = _plant_batch(vehicle, settings.plant, settings.dt_s, q)
     rms_y, rms_q, rms_z = _rms(y), _rms(q), _rms(z_w)
-    x2_initial = np.column_stack([np.zeros(q.shape[1]), q[0] + params["initial_error_m"]])
-    threshold = params["convergence_fraction"] * rms_z
-    window = t_s >= params["error_window_start_s"]
-    force = sw.dynamic_contact_force_N(vehicle, z_w, q, params["plant"])
+    x2_initial = np.column_stack([np.zeros(q.shape[1]), q[0] + settings.initial_error_m])
+    threshold = settings.convergence_fraction * rms_z
+    window = t_s >= settings.error_window_start_s
+    force = sw.dynamic_contact_force_N(vehicle, z_w, q, settings.plant)
     out = {"force_rms_N": _rms(force[window]), "z_w_rms_m": rms_z}
     error_free = np.empty((len(t_s), 2))                   # error dynamics alone, e[k+1] = Φ e[k]
-    error_free[0] = [0.0, params["initial_error_m"]]
+    error_free[0] = [0.0, settings.initial_error_m]
     for k in range(len(t_s) - 1):
         error_free[k + 1] = observer.Phi @ error_free[k]
     out["predicted_convergence_time_s"] = settling_time_s(
@@ -91,8 +91,8 @@ def _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference):
     fixed = (noise_y[:, reference], noise_q[:, reference], rms_y[reference], rms_q[reference])
     for noise, (draw_y, draw_q, sigma_y, sigma_q) in (
             ("", (noise_y, noise_q, rms_y, rms_q)), ("_fixed_noise", fixed)):
-        y_meas = y + draw_y * params["noise_fraction"] * sigma_y
-        q_meas = q + draw_q * params["track_noise_fraction"] * sigma_q
+        y_meas = y + draw_y * settings.noise_fraction * sigma_y
+        q_meas = q + draw_q * settings.track_noise_fraction * sigma_q
         z_est = _observer_batch(observer, y_meas, q_meas, x2_initial)
         force_error = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear") - force
         out[f"force_rms_error_N{noise}"] = _rms(force_error[window])
@@ -106,7 +106,7 @@ def _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference):
     return out
 
 
-def _hertz_samples(reading, params, t_s, q, columns) -> dict:
+def _hertz_samples(reading, settings: Settings, t_s, q, columns) -> dict:
     """On the columns ``columns`` of q (NaN elsewhere), with the wheelset simulated under the
     nonlinear Hertz contact: ``force_relative_rms_error_hertz``, the relative RMS error of the
     linearised contact force K_r (z_w − q) against the Hertz force (δ/G)^(3/2) on that trajectory;
@@ -119,15 +119,15 @@ def _hertz_samples(reading, params, t_s, q, columns) -> dict:
     if not len(columns):
         return out
     q_sub = q[:, columns]
-    y, z_w = _plant_batch(vehicle, "hertz", params["dt_s"], q_sub)
+    y, z_w = _plant_batch(vehicle, "hertz", settings.dt_s, q_sub)
     hertz = sw.dynamic_contact_force_N(vehicle, z_w, q_sub, "hertz")
-    window = t_s >= params["error_window_start_s"]
+    window = t_s >= settings.error_window_start_s
     linear = sw.dynamic_contact_force_N(vehicle, z_w, q_sub, "linear")
     out["force_relative_rms_error_hertz"][columns] = _rms((linear - hertz)[window]) / _rms(
         hertz[window])
     A, B = sw.state_space(vehicle)
-    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], "foh")
-    x2_initial = np.column_stack([np.zeros(len(columns)), q_sub[0] + params["initial_error_m"]])
+    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, "foh")
+    x2_initial = np.column_stack([np.zeros(len(columns)), q_sub[0] + settings.initial_error_m])
     z_est = _observer_batch(observer, y, q_sub, x2_initial)
     estimated = sw.dynamic_contact_force_N(vehicle, z_est, q_sub, "linear")
     out["force_relative_rms_error_hertz_observer"][columns] = _rms(
@@ -135,13 +135,13 @@ def _hertz_samples(reading, params, t_s, q, columns) -> dict:
     return out
 
 
-def monte_carlo(params: dict, progress=None) -> pd.DataFrame:
+def monte_carlo(settings: Settings, progress=None) -> pd.DataFrame:
     """The Monte Carlo table: one row per (seed, speed, reading), columns :data:`SAMPLE_COLUMNS`.
 
     Parameters
     ----------
-    params : dict
-        The chapter's resolved parameters (``seed``, ``mc_seeds``, speeds, noise, observer, …).
+    settings : Settings
+        The chapter's settings (``seed``, ``mc_seeds``, speeds, noise, observer, …).
     progress : callable, optional
         ``progress(fraction, message)``.
 
@@ -153,15 +153,15 @@ def monte_carlo(params: dict, progress=None) -> pd.DataFrame:
         outside the first :data:`HERTZ_SEEDS` seeds and the paper's speeds).
     """
     progress = progress or (lambda fraction, message: None)
-    speeds = all_speeds(params)
-    seeds = list(range(params["seed"], params["seed"] + params["mc_seeds"]))
-    reference_speed = params["speeds_kmh"][0]
+    speeds = all_speeds(settings)
+    seeds = list(range(settings.seed, settings.seed + settings.mc_seeds))
+    reference_speed = settings.speeds_kmh[0]
     columns_q, columns_ny, columns_nq, keys = [], [], [], []
     for seed in seeds:
-        distance_m, profile_m = profile(params, seed)
+        distance_m, profile_m = profile(settings, seed)
         for speed in speeds:
             t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0],
-                                           params["dt_s"], params["duration_s"])
+                                           settings.dt_s, settings.duration_s)
             ny, nq = noise_draws(seed, speed, len(t_s))
             columns_q.append(q[:, 0])
             columns_ny.append(ny)
@@ -173,13 +173,13 @@ def monte_carlo(params: dict, progress=None) -> pd.DataFrame:
     index = {key: i for i, key in enumerate(keys)}
     reference = np.array([index[(seed, reference_speed)] for seed, _ in keys])
     hertz_columns = np.array([i for i, (seed, speed) in enumerate(keys)
-                              if seed < params["seed"] + HERTZ_SEEDS
-                              and speed in params["speeds_kmh"]], dtype=int)
+                              if seed < settings.seed + HERTZ_SEEDS
+                              and speed in settings.speeds_kmh], dtype=int)
     frames = []
     for i, reading in enumerate(READINGS):
         progress(i / len(READINGS), f"Monte Carlo, P0 per {reading}")
-        samples = _reading_samples(reading, params, t_s, q, noise_y, noise_q, reference)
-        samples.update(_hertz_samples(reading, params, t_s, q, hertz_columns))
+        samples = _reading_samples(reading, settings, t_s, q, noise_y, noise_q, reference)
+        samples.update(_hertz_samples(reading, settings, t_s, q, hertz_columns))
         frame = pd.DataFrame(keys, columns=["seed", "speed_kmh"])
         frame["reading"] = reading
         for name in SAMPLE_COLUMNS:
@@ -189,13 +189,13 @@ def monte_carlo(params: dict, progress=None) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-def _per_seed(table: pd.DataFrame, column: str, speeds: list[float]) -> np.ndarray:
-    """values[seed, speed] of one column (speeds in the given order)."""
+def _per_seed(table: pd.DataFrame, column: str, speeds) -> np.ndarray:
+    """values[seed, speed] of one column (``speeds``, a list or tuple, in the given order)."""
     wide = table.pivot(index="seed", columns="speed_kmh", values=column)
-    return wide[speeds].to_numpy()
+    return wide[list(speeds)].to_numpy()
 
 
-def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
+def evidence_metrics(table: pd.DataFrame, settings: Settings) -> dict:
     """Metrics the claim rules read, for every reading (suffix ``_<reading>``).
 
     * ``mc_<q>_worst_<r>``: median over seeds of the worse of the paper's speeds (``speeds_kmh``)
@@ -215,21 +215,21 @@ def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
       noise-free FOH observer's force (``mc_force_relative_rms_error_hertz_observer_worst_<r>``).
     """
     metrics = {}
-    speeds = sorted(all_speeds(params))
+    speeds = sorted(all_speeds(settings))
     for reading in READINGS:
         t = table[table.reading == reading].copy()
         metrics[f"mc_convergence_never_{reading}"] = int((t.convergence_time_s < 0).sum())
         for column in ("convergence_time_s", "predicted_convergence_time_s"):
-            t[column] = t[column].where(t[column] >= 0, params["duration_s"])   # censored
+            t[column] = t[column].where(t[column] >= 0, settings.duration_s)   # censored
         for column in ("convergence_time_s", "displacement_relative_rms_error",
                        "force_relative_rms_error"):
-            worst = _per_seed(t, column, params["speeds_kmh"]).max(axis=1)
+            worst = _per_seed(t, column, settings.speeds_kmh).max(axis=1)
             metrics.update(stats.median_interval(worst).metrics(f"mc_{column}_worst_{reading}"))
         hertz = t.dropna(subset=["force_relative_rms_error_hertz"])
         for column in ("force_relative_rms_error_hertz",
                        "force_relative_rms_error_hertz_observer"):
             if len(hertz):
-                worst = _per_seed(hertz, column, params["speeds_kmh"]).max(axis=1)
+                worst = _per_seed(hertz, column, settings.speeds_kmh).max(axis=1)
                 metrics.update(stats.median_interval(worst).metrics(
                     f"mc_{column}_worst_{reading}"))
         for column, name in (("convergence_time_s", "convergence_time"),
@@ -250,11 +250,11 @@ def evidence_metrics(table: pd.DataFrame, params: dict) -> dict:
     return metrics
 
 
-def legacy_band_metrics(table: pd.DataFrame, params: dict) -> dict:
+def legacy_band_metrics(table: pd.DataFrame, settings: Settings) -> dict:
     """Per-speed median and 95 % quantile over seeds (the chapter's reading), as before."""
-    t = table[table.reading == params["p0_basis"]]
+    t = table[table.reading == settings.p0_basis]
     out = {}
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         at = t[t.speed_kmh == speed]
         for column in ("convergence_time_s", "force_relative_rms_error"):
             out[f"mc_{column}_median_{speed:g}kmh"] = float(at[column].quantile(0.5))
@@ -310,7 +310,7 @@ def _pole_error(A, B, poles) -> float:
     return float(max(abs(p - w) / abs(w) for p, w in zip(placed, want)))
 
 
-def structure_metrics(params: dict) -> dict:
+def structure_metrics(settings: Settings) -> dict:
     """Deterministic evidence per reading ``r``: ``rank_Q0_exact_r``, ``rank_Q1_exact_r``,
     ``rank_reduced_exact_r`` (of [A12; A12 A22], needs 2), the same ranks in floating point
     (``_numpy``, numpy's default tolerance; ``_pbh``, Popov–Belevitch–Hautus), and
@@ -334,7 +334,7 @@ def structure_metrics(params: dict) -> dict:
         out[f"rank_Q1_pbh_{reading}"] = _pbh_rank(A, C, observability=True)
         out[f"rank_reduced_pbh_{reading}"] = _pbh_rank(A22, A12, observability=True)
         out[f"pole_placement_relative_error_{reading}"] = max(
-            _pole_error(A, B, poles) for poles in [params["observer_poles"], *POLE_SETS])
+            _pole_error(A, B, poles) for poles in [settings.observer_poles, *POLE_SETS])
     out["rank_Q0_Q1_exact_min"] = min(out[f"rank_{m}_exact_{r}"] for m in ("Q0", "Q1")
                                       for r in READINGS)
     out["rank_reduced_exact_min"] = min(out[f"rank_reduced_exact_{r}"] for r in READINGS)

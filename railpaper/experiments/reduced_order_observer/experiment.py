@@ -42,39 +42,39 @@ from railpaper.experiments.reduced_order_observer.record import (  # noqa: F401 
 from railpaper.experiments.reduced_order_observer.result import (
     ReducedOrderObserverResult,
 )
-from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTIONS
+from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTIONS, Settings
 from railpaper.models import single_wheelset as sw
 
 
-def validate(params: dict) -> None:
-    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
-    if params["plant"] not in ("linear", "hertz"):
-        raise ParameterError(f"parameter 'plant' must be 'linear' or 'hertz', got {params['plant']!r}")
-    if params["observer_form"] not in ("paper", "foh"):
+def validate(settings: Settings) -> None:
+    """Refuse non-physical or inconsistent settings with one line, before any work."""
+    if settings.plant not in ("linear", "hertz"):
+        raise ParameterError(f"parameter 'plant' must be 'linear' or 'hertz', got {settings.plant!r}")
+    if settings.observer_form not in ("paper", "foh"):
         raise ParameterError(
-            f"parameter 'observer_form' must be 'paper' or 'foh', got {params['observer_form']!r}")
-    if params["p0_basis"] not in sw.P0_BASES:
+            f"parameter 'observer_form' must be 'paper' or 'foh', got {settings.observer_form!r}")
+    if settings.p0_basis not in sw.P0_BASES:
         raise ParameterError(
-            f"parameter 'p0_basis' must be 'wheel' or 'wheelset', got {params['p0_basis']!r}")
-    if params["mc_seeds"] >= 1000:
+            f"parameter 'p0_basis' must be 'wheel' or 'wheelset', got {settings.p0_basis!r}")
+    if settings.mc_seeds >= 1000:
         raise ParameterError("parameter 'mc_seeds' must be < 1000 (seed batches 1000 apart are "
-                             f"disjoint), got {params['mc_seeds']}")
-    if not 1 <= params["track_class"] <= 6:
-        raise ParameterError(f"parameter 'track_class' must be 1..6, got {params['track_class']}")
-    if len(params["observer_poles"]) != 2 or max(params["observer_poles"]) >= 0:
+                             f"disjoint), got {settings.mc_seeds}")
+    if not 1 <= settings.track_class <= 6:
+        raise ParameterError(f"parameter 'track_class' must be 1..6, got {settings.track_class}")
+    if len(settings.observer_poles) != 2 or max(settings.observer_poles) >= 0:
         raise ParameterError("parameter 'observer_poles' needs two negative numbers, e.g. [-30, -40]")
-    if params["dt_s"] > 5e-4:
+    if settings.dt_s > 5e-4:
         raise ParameterError(
-            f"parameter 'dt_s' = {params['dt_s']} s is too coarse for the 243 Hz wheelset mode "
+            f"parameter 'dt_s' = {settings.dt_s} s is too coarse for the 243 Hz wheelset mode "
             "(use ≤ 5e-4 s)")
-    if params["error_window_start_s"] >= params["duration_s"]:
+    if settings.error_window_start_s >= settings.duration_s:
         raise ParameterError("parameter 'error_window_start_s' must be shorter than 'duration_s'")
 
 
-def design_observers(A, B, params) -> dict:
+def design_observers(A, B, settings: Settings) -> dict:
     """The paper's observer (12) discretised two ways: ``paper`` (ZOH) and ``foh``."""
-    observer = roo.design(A, B, 2, params["observer_poles"])
-    return {form: observer.discretise(params["dt_s"], "zoh" if form == "paper" else "foh")
+    observer = roo.design(A, B, 2, settings.observer_poles)
+    return {form: observer.discretise(settings.dt_s, "zoh" if form == "paper" else "foh")
             for form in ("paper", "foh")}
 
 
@@ -86,16 +86,16 @@ def _rms(x, axis=0):
     return np.sqrt(np.mean(x**2, axis=axis))
 
 
-def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
+def _side_tables(vehicle, observers, settings: Settings, distance_m, profile_m, progress):
     """The noise-sensitivity table (first speed, the ``observer_form`` observer at each of
     :data:`NOISE_SWEEP_FRACTIONS`, noise draws salted 1) and the linear-vs-Hertz table
     (noise-free sensors, FOH observer, every speed of ``speeds_kmh``, draws salted 2), each
     simulated as one batch (one plant run per table and plant)."""
-    dt, e0, seed = params["dt_s"], params["initial_error_m"], params["seed"]
+    dt, e0, seed = settings.dt_s, settings.initial_error_m, settings.seed
 
     def inputs(speed, salt):
         t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], dt,
-                                       params["duration_s"])
+                                       settings.duration_s)
         ny, nq = record.noise_draws(seed, speed, len(t_s), salt)
         return t_s, q[:, 0], ny, nq
 
@@ -105,24 +105,24 @@ def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
         f_est = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
         return _rms((f_est - force)[window]), _rms((z_est - z_w)[window])
 
-    speed, fractions = params["speeds_kmh"][0], np.array(NOISE_SWEEP_FRACTIONS)
+    speed, fractions = settings.speeds_kmh[0], np.array(NOISE_SWEEP_FRACTIONS)
     t_s, q, ny, nq = inputs(speed, (1,))
-    y, z_w = record._plant_batch(vehicle, params["plant"], dt, q[:, None])
-    force = sw.dynamic_contact_force_N(vehicle, z_w, q[:, None], params["plant"])
-    window = t_s >= params["error_window_start_s"]
+    y, z_w = record._plant_batch(vehicle, settings.plant, dt, q[:, None])
+    force = sw.dynamic_contact_force_N(vehicle, z_w, q[:, None], settings.plant)
+    window = t_s >= settings.error_window_start_s
     y_meas = y + ny[:, None] * fractions[:, None] * _rms(y)               # (K, levels, 2)
-    q_meas = np.repeat((q + nq * params["track_noise_fraction"] * _rms(q))[:, None],
+    q_meas = np.repeat((q + nq * settings.track_noise_fraction * _rms(q))[:, None],
                        len(fractions), axis=1)
-    force_error, z_error = errors(observers[params["observer_form"]], y_meas,
+    force_error, z_error = errors(observers[settings.observer_form], y_meas,
                                   np.repeat(q[:, None], len(fractions), axis=1), q_meas,
                                   z_w, force, window)
     noise_rows = [{"noise_fraction": f, "speed_kmh": speed,
                    "force_relative_rms_error": force_error[i] / _rms(force[window])[0],
                    "displacement_rms_error_m": z_error[i]} for i, f in enumerate(fractions)]
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     columns = [inputs(v, (2,)) for v in speeds]
     q = np.column_stack([c[1] for c in columns])
-    q_meas = q + np.column_stack([c[3] for c in columns]) * params["track_noise_fraction"] * _rms(q)
+    q_meas = q + np.column_stack([c[3] for c in columns]) * settings.track_noise_fraction * _rms(q)
     plant_rows = []
     for plant in ("linear", "hertz"):                      # cost of linearising the contact
         progress(0.55, f"{plant} plant, noise-free")
@@ -137,36 +137,35 @@ def _side_tables(vehicle, observers, params, distance_m, profile_m, progress):
     return pd.DataFrame(noise_rows), pd.DataFrame(plant_rows)
 
 
-def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserverResult:
-    """Run the chapter; ``params`` are the resolved parameters of :data:`SPEC`.
+def run(settings: Settings, *, progress=None) -> ReducedOrderObserverResult:
+    """Run the chapter with its resolved ``settings`` (of :data:`SPEC`; quick sizes included).
 
     Single runs of seed ``seed`` (reading ``p0_basis``) give the illustrations and their metrics;
     with ``side_tables`` the run adds the side tables and the claims' evidence: the Monte Carlo
     metrics (``mc_*``, every reading), the deterministic structure metrics (``rank_*`` and
     ``pole_placement_*``) and the estimator comparison (:func:`kalman.compare`, reading
     ``p0_basis``).
-    ``quick`` is not read: ``params`` already hold the quick sizes.
     """
-    validate(params)
+    validate(settings)
     progress = progress or default_progress()
     started = time.perf_counter()
-    vehicle = sw.load_parameters(p0_basis=params["p0_basis"])
+    vehicle = sw.load_parameters(p0_basis=settings.p0_basis)
     A, B = sw.state_space(vehicle)
-    observers = design_observers(A, B, params)
-    form = params["observer_form"]
+    observers = design_observers(A, B, settings)
+    form = settings.observer_form
     other = "foh" if form == "paper" else "paper"
-    all_speeds = record.all_speeds(params)
-    distance_m, profile_m = record.profile(params, params["seed"])
+    all_speeds = record.all_speeds(settings)
+    distance_m, profile_m = record.profile(settings, settings.seed)
     runs = {}
     for i, speed in enumerate(all_speeds):
         progress(0.5 * i / len(all_speeds), f"{speed:g} km/h")
-        runs[speed] = simulate_speed(vehicle, observers, params, distance_m, profile_m, speed)
-    noise_sweep, plant_comparison = _side_tables(vehicle, observers, params, distance_m, profile_m,
-                                                 progress) if params["side_tables"] else \
-        (pd.DataFrame(), pd.DataFrame())
+        runs[speed] = simulate_speed(vehicle, observers, settings, distance_m, profile_m, speed)
+    noise_sweep, plant_comparison = _side_tables(
+        vehicle, observers, settings, distance_m, profile_m, progress) if settings.side_tables \
+        else (pd.DataFrame(), pd.DataFrame())
 
-    metrics, columns = {}, {"t_s": runs[params["speeds_kmh"][0]].record.t_s}
-    for speed in params["speeds_kmh"]:
+    metrics, columns = {}, {"t_s": runs[settings.speeds_kmh[0]].record.t_s}
+    for speed in settings.speeds_kmh:
         r, lab = runs[speed], _label(speed)
         main = r.observer(form)
         metrics[f"convergence_time_s_{lab}"] = main.convergence_time_s
@@ -179,16 +178,16 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
         columns[f"wheel_rail_force_est_N_{lab}"] = main.force_est_N
     mc, estimators = pd.DataFrame(), None
     timings = {"single_runs_s": time.perf_counter() - started}
-    if params["side_tables"]:
+    if settings.side_tables:
         mc_started = time.perf_counter()
-        mc = evidence.monte_carlo(params, lambda f, m: progress(0.6 + 0.2 * f, m))
-        metrics.update(evidence.legacy_band_metrics(mc, params))
-        metrics.update(evidence.evidence_metrics(mc, params))
-        metrics.update(evidence.structure_metrics(params))
+        mc = evidence.monte_carlo(settings, lambda f, m: progress(0.6 + 0.2 * f, m))
+        metrics.update(evidence.legacy_band_metrics(mc, settings))
+        metrics.update(evidence.evidence_metrics(mc, settings))
+        metrics.update(evidence.structure_metrics(settings))
         timings["monte_carlo_s"] = time.perf_counter() - mc_started
         kalman_started = time.perf_counter()
-        estimators = kalman.compare(params, lambda f, m: progress(0.8 + 0.2 * f, m))
-        metrics.update(kalman.comparison_metrics(estimators, params))
+        estimators = kalman.compare(settings, lambda f, m: progress(0.8 + 0.2 * f, m))
+        metrics.update(kalman.comparison_metrics(estimators, settings))
         timings["kalman_s"] = time.perf_counter() - kalman_started
     progress(1.0, "done")
     sweep = pd.DataFrame([{
@@ -201,14 +200,14 @@ def run(*, quick: bool = False, progress=None, **params) -> ReducedOrderObserver
         "predicted_convergence_time_s": runs[s].predicted_convergence_time_s,
         f"convergence_time_s_{other}": runs[s].observer(other).convergence_time_s,
         f"force_rms_error_N_{other}": runs[s].observer(other).force_rms_error_N,
-    } for s in params["sweep_speeds_kmh"]])
-    observer = roo.design(A, B, 2, params["observer_poles"])
+    } for s in settings.sweep_speeds_kmh])
+    observer = roo.design(A, B, 2, settings.observer_poles)
     timings["run_s"] = time.perf_counter() - started
     return ReducedOrderObserverResult(
         metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
         extra_tables={"speed_sweep": sweep, "monte_carlo_samples": mc,
                       "estimator_samples": estimators.samples}
-        if params["side_tables"] else {"speed_sweep": sweep},
+        if settings.side_tables else {"speed_sweep": sweep},
         vehicle=vehicle, A=A, B=B, observer=observer,
         error_poles_per_s=np.linalg.eigvals(observer.F), runs=runs, speed_sweep=sweep,
         noise_sweep=noise_sweep, plant_comparison=plant_comparison, monte_carlo=mc,

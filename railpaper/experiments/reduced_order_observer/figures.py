@@ -1,7 +1,7 @@
 """Figures of chapter ``reduced-order-observer`` (matplotlib, ≤ 7 in wide, legends outside the data).
 
 Each function takes the run's named results (:class:`ReducedOrderObserverResult`) and its
-parameters and returns the figure; the notebook saves it and shows it as a numbered MyST figure.
+settings and returns the figure; the notebook saves it and shows it as a numbered MyST figure.
 """
 
 from __future__ import annotations
@@ -10,6 +10,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+from railpaper.experiments.reduced_order_observer.spec import Settings
 
 #: Display names of the two discretisations of the paper's observer.
 OBSERVER_NAMES = {"paper": "paper's observer (ZOH)", "foh": "observer, FOH discretisation"}
@@ -25,20 +27,20 @@ def _never_as_nan(values) -> np.ndarray:
     return np.where(values < 0, np.nan, values)
 
 
-def displacement(result, params):
+def displacement(result, settings: Settings):
     """Per speed: true and observed z_w (top) and |error| on a log scale with the convergence
     threshold and time (bottom)."""
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     fig, axes = plt.subplots(2, len(speeds), figsize=(7, 4.8), squeeze=False, sharex=True)
     for j, speed in enumerate(speeds):
         r = result.runs[speed]
         t, z = r.record.t_s, r.record.x_true[:, 3]
-        est = r.observer(params["observer_form"])
+        est = r.observer(settings.observer_form)
         top, bottom = axes[0, j], axes[1, j]
         top.plot(t, z * 1e3, lw=2.0, color="C0")
         top.plot(t, est.z_w_est_m * 1e3, lw=0.9, ls="--", color="C1")
         bottom.semilogy(t, np.abs(est.z_w_est_m - z) * 1e3, lw=0.7, color="C1")
-        bottom.axhline(params["convergence_fraction"] * r.z_w_rms_m * 1e3, color="k", ls=":", lw=1.2)
+        bottom.axhline(settings.convergence_fraction * r.z_w_rms_m * 1e3, color="k", ls=":", lw=1.2)
         if est.convergence_time_s >= 0:
             for ax in (top, bottom):
                 ax.axvline(est.convergence_time_s, color="grey", lw=1.0)
@@ -48,26 +50,27 @@ def displacement(result, params):
     axes[1, 0].set_ylabel("$|\\hat z_w - z_w|$ (mm)")
     handles = [Line2D([], [], lw=2.0, color="C0"), Line2D([], [], lw=0.9, ls="--", color="C1"),
                Line2D([], [], color="k", ls=":", lw=1.2), Line2D([], [], color="grey", lw=1.0)]
-    labels = ["simulated $z_w$", f"estimate, {OBSERVER_NAMES[params['observer_form']]}",
+    labels = ["simulated $z_w$", f"estimate, {OBSERVER_NAMES[settings.observer_form]}",
               "threshold: 5 % of RMS $z_w$", "convergence time"]
     fig.tight_layout()
     _legend_below(fig, handles, labels, ncol=2)
     return fig
 
 
-def force(result, params, metrics, window_s: float = 0.1, moving_rms_s: float = 0.01):
+def force(result, settings: Settings, metrics, window_s: float = 0.1,
+          moving_rms_s: float = 0.01):
     """Per speed: true and observed force over ``window_s`` after the error window starts (left)
     and the moving RMS of the force and of the error over the whole run, log scale (right)."""
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     fig, axes = plt.subplots(len(speeds), 2, figsize=(7, 2.5 * len(speeds) + 0.4), squeeze=False,
                              gridspec_kw={"width_ratios": [1, 1]})
-    n = int(round(moving_rms_s / params["dt_s"]))
+    n = int(round(moving_rms_s / settings.dt_s))
     moving = lambda x: np.sqrt(np.convolve(x**2, np.ones(n) / n, mode="same"))  # noqa: E731
-    start = params["error_window_start_s"]
+    start = settings.error_window_start_s
     for (left, right), speed in zip(axes, speeds):
         r = result.runs[speed]
         t, f_true = r.record.t_s, r.record.force_true_N
-        f_est = r.observer(params["observer_form"]).force_est_N
+        f_est = r.observer(settings.observer_form).force_est_N
         shown = (t >= start) & (t <= start + window_s)
         left.plot(t[shown], f_est[shown] / 1e3, lw=0.6, color="C1")
         left.plot(t[shown], f_true[shown] / 1e3, lw=1.6, color="C0")
@@ -89,10 +92,10 @@ def force(result, params, metrics, window_s: float = 0.1, moving_rms_s: float = 
     return fig
 
 
-def trends(result, params):
+def trends(result, settings: Settings):
     """One record over the sweep speeds: convergence time (left), RMS force error (right)."""
     sweep = result.speed_sweep
-    form = params["observer_form"]
+    form = settings.observer_form
     other = "foh" if form == "paper" else "paper"
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(7, 3.2))
     v = sweep.speed_kmh
@@ -114,10 +117,10 @@ def trends(result, params):
     return fig
 
 
-def monte_carlo(result, params):
+def monte_carlo(result, settings: Settings):
     """Over seeds, the chapter's reading of P0: convergence time (boxes), RMS force error at
     both noise models with the RMS force (median, 5–95 % band), relative force error (boxes)."""
-    t = result.monte_carlo[result.monte_carlo.reading == params["p0_basis"]]
+    t = result.monte_carlo[result.monte_carlo.reading == settings.p0_basis]
     speeds = sorted(t.speed_kmh.unique())
     width = 0.25 * min(np.diff(speeds)) if len(speeds) > 1 else 5.0
     med = t.groupby("speed_kmh").median(numeric_only=True)
@@ -158,11 +161,11 @@ ESTIMATOR_STYLES = {"observer": ("paper's observer", "C1", "o", "-"),
                     "smoother": ("RTS smoother (offline)", "C4", "D", "--")}
 
 
-def force_error_vs_noise(result, params):
+def force_error_vs_noise(result, settings: Settings):
     """RMS force error / RMS force of each estimator against the sensor noise (top, median and
     5–95 % band over seeds) and against the noise on the irregularity record (bottom), per speed."""
     s = result.estimators.samples
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     fig, axes = plt.subplots(2, len(speeds), figsize=(7, 6), squeeze=False, sharey="row")
     for row, (sweep, column, xlabel) in enumerate((
             ("sensor", "noise_fraction", "sensor noise σ on $\\dot z_c$, $z_c$ (% of RMS)"),
@@ -179,7 +182,7 @@ def force_error_vs_noise(result, params):
                    title=f"{speed:g} km/h, {t.seed.nunique()} seeds")
         axes[row, 0].set_ylabel("RMS force error / RMS force")
     for ax in axes[0]:
-        ax.axvline(100 * params["noise_fraction"], color="k", lw=0.8, ls="--")
+        ax.axvline(100 * settings.noise_fraction, color="k", lw=0.8, ls="--")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     handles.append(Line2D([], [], color="k", lw=0.8, ls="--"))
     labels.append("the run's sensor noise")
@@ -188,15 +191,16 @@ def force_error_vs_noise(result, params):
     return fig
 
 
-def force_estimates(result, params, window_s: float = 0.05, moving_rms_s: float = 0.01):
+def force_estimates(result, settings: Settings, window_s: float = 0.05,
+                    moving_rms_s: float = 0.01):
     """One record at the run's noise, per speed: the Kalman filter's and the smoother's force
     against the simulated one over ``window_s`` after the error window starts (left) and the
     moving RMS of every estimator's error over the whole run, log scale (right)."""
-    speeds = params["speeds_kmh"]
+    speeds = settings.speeds_kmh
     fig, axes = plt.subplots(len(speeds), 2, figsize=(7, 2.6 * len(speeds) + 0.4), squeeze=False)
-    n = int(round(moving_rms_s / params["dt_s"]))
+    n = int(round(moving_rms_s / settings.dt_s))
     moving = lambda x: np.sqrt(np.convolve(x**2, np.ones(n) / n, mode="same"))  # noqa: E731
-    start = params["error_window_start_s"]
+    start = settings.error_window_start_s
     for (left, right), speed in zip(axes, speeds):
         e = result.estimators.examples[speed]
         shown = (e.t_s >= start) & (e.t_s <= start + window_s)

@@ -48,7 +48,7 @@ from railpaper.experiments.reduced_order_observer.result import (
     ForceEstimates,
     KalmanComparison,
 )
-from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS
+from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS, Settings
 from railpaper.models import single_wheelset as sw
 
 #: Sensor-noise levels (σ / channel RMS) of the comparison; the run's ``noise_fraction`` is added.
@@ -109,19 +109,19 @@ def kalman_model(A: np.ndarray, B: np.ndarray, shaping: kb.ShapingFilter, dt_s: 
     return KalmanModel(F=F, Q=Q, H=H, P_stationary=solve_discrete_lyapunov(F, Q))
 
 
-def noise_levels(params: dict) -> list[float]:
+def noise_levels(settings: Settings) -> list[float]:
     """The comparison's noise levels: :data:`NOISE_FRACTIONS` and the run's ``noise_fraction``."""
-    return sorted(set(NOISE_FRACTIONS) | {float(params["noise_fraction"])})
+    return sorted(set(NOISE_FRACTIONS) | {float(settings.noise_fraction)})
 
 
-def filter_covariances(model: KalmanModel, configs, params: dict):
+def filter_covariances(model: KalmanModel, configs, settings: Settings):
     """``(R, P0)`` of each ``(sensor noise fraction, track noise fraction)`` in ``configs``
     (leading axis of R), as the module docstring says."""
     std = model.stationary_std
     R = np.array([np.diag([(max(f, Y_NOISE_FLOOR) * std[0]) ** 2,
                            (max(f, Y_NOISE_FLOOR) * std[1]) ** 2,
                            (max(fq, Q_NOISE_FLOOR) * std[4]) ** 2]) for f, fq in configs])
-    P0 = model.P_stationary + np.diag([0.0, 0.0, 0.0, params["initial_error_m"] ** 2, 0.0, 0.0])
+    P0 = model.P_stationary + np.diag([0.0, 0.0, 0.0, settings.initial_error_m ** 2, 0.0, 0.0])
     return R, P0
 
 
@@ -146,39 +146,40 @@ class _Records:
                         self.draws_y[:, :n], self.draws_q[:, :n])
 
 
-def _simulate(vehicle, params, speed, profiles) -> _Records:
+def _simulate(vehicle, settings: Settings, speed, profiles) -> _Records:
     """The plant on every seed's profile at one speed (the chapter's records and draws)."""
     columns_q, draws_y, draws_q = [], [], []
     for seed, (distance_m, profile_m) in profiles.items():
-        t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], params["dt_s"],
-                                       params["duration_s"])
+        t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], settings.dt_s,
+                                       settings.duration_s)
         ny, nq = record.noise_draws(seed, speed, len(t_s))
         columns_q.append(q[:, 0])
         draws_y.append(ny)
         draws_q.append(nq)
     q = np.column_stack(columns_q)                                      # (K, S)
-    y, z_w = record._plant_batch(vehicle, params["plant"], params["dt_s"], q)
+    y, z_w = record._plant_batch(vehicle, settings.plant, settings.dt_s, q)
     return _Records(list(profiles), t_s, q, y,
-                    sw.dynamic_contact_force_N(vehicle, z_w, q, params["plant"]),
+                    sw.dynamic_contact_force_N(vehicle, z_w, q, settings.plant),
                     np.stack(draws_y, axis=1), np.column_stack(draws_q))
 
 
-def _speed_samples(vehicle, model, observer, params, speed, records: _Records, configs):
+def _speed_samples(vehicle, model, observer, settings: Settings, speed, records: _Records,
+                   configs):
     """Per-sample rows at one speed (every record, every ``(sensor noise fraction, track noise
     fraction)`` of ``configs``) and the first record's forces at the first config."""
     seeds, t_s, q, y, force = records.seeds, records.t_s, records.q, records.y, records.force
-    window = t_s >= params["error_window_start_s"]
+    window = t_s >= settings.error_window_start_s
     force_rms, q_rms = _rms(force[window]), _rms(q)                    # (S,)
     L, S = len(configs), len(seeds)
     sensor, track_noise = (np.array([c[i] for c in configs])[:, None] for i in (0, 1))
     meas = np.empty((len(q), L, S, 3))                                  # [ż_c, z_c, q] measured
     meas[..., :2] = y[:, None] + records.draws_y[:, None] * sensor[..., None] * _rms(y)
     meas[..., 2] = q[:, None] + records.draws_q[:, None] * track_noise * _rms(q)
-    x2_initial = np.stack([np.zeros(S), q[0] + params["initial_error_m"]], axis=-1)   # (S, 2)
+    x2_initial = np.stack([np.zeros(S), q[0] + settings.initial_error_m], axis=-1)   # (S, 2)
     estimates = {"observer": sw.dynamic_contact_force_N(vehicle, record._observer_batch(
         observer, meas[..., :2].reshape(len(q), L * S, 2), meas[..., 2].reshape(len(q), L * S),
         np.tile(x2_initial, (L, 1))).reshape(len(q), L, S), meas[..., 2])}
-    R, P0 = filter_covariances(model, configs, params)
+    R, P0 = filter_covariances(model, configs, settings)
     gains = ks.gains(model.F, model.Q, model.H, R, P0, len(t_s))        # one model per config
     x0 = np.concatenate([meas[0, ..., :2], np.broadcast_to(x2_initial, (L, S, 2)),
                          meas[0, ..., 2:], np.zeros((L, S, 1))], axis=-1)
@@ -200,32 +201,32 @@ def _speed_samples(vehicle, model, observer, params, speed, records: _Records, c
     return rows, example
 
 
-def compare(params: dict, progress=None) -> KalmanComparison:
+def compare(settings: Settings, progress=None) -> KalmanComparison:
     """The paper's observer, the Kalman filter and the smoother at the run's speeds
     (``speeds_kmh``), reading ``p0_basis``: on ``mc_seeds`` seeds × :func:`noise_levels` (track
     noise ``track_noise_fraction``), and on the first :data:`TRACK_NOISE_SEEDS` seeds ×
     :data:`TRACK_NOISE_FRACTIONS` at the run's sensor noise."""
     progress = progress or (lambda fraction, message: None)
-    vehicle = sw.load_parameters(p0_basis=params["p0_basis"])
+    vehicle = sw.load_parameters(p0_basis=settings.p0_basis)
     A, B = sw.state_space(vehicle)
-    hold = "zoh" if params["observer_form"] == "paper" else "foh"
-    observer = roo.design(A, B, 2, params["observer_poles"]).discretise(params["dt_s"], hold)
-    profiles = {seed: record.profile(params, seed)
-                for seed in range(params["seed"], params["seed"] + params["mc_seeds"])}
-    levels = noise_levels(params)
-    run_noise, run_track = float(params["noise_fraction"]), float(params["track_noise_fraction"])
+    hold = "zoh" if settings.observer_form == "paper" else "foh"
+    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, hold)
+    profiles = {seed: record.profile(settings, seed)
+                for seed in range(settings.seed, settings.seed + settings.mc_seeds)}
+    levels = noise_levels(settings)
+    run_noise, run_track = float(settings.noise_fraction), float(settings.track_noise_fraction)
     sensor_configs = [(run_noise, run_track)] + [(f, run_track) for f in levels if f != run_noise]
     track_configs = [(run_noise, f) for f in TRACK_NOISE_FRACTIONS]
     rows, examples, shaping = [], {}, {}
-    for i, speed in enumerate(params["speeds_kmh"]):
-        progress(i / len(params["speeds_kmh"]), f"Kalman filter and smoother, {speed:g} km/h")
-        shaping[speed] = shaping_filter(params["track_class"], speed / 3.6)
-        model = kalman_model(A, B, shaping[speed], params["dt_s"])
-        records = _simulate(vehicle, params, speed, profiles)
-        speed_rows, examples[speed] = _speed_samples(vehicle, model, observer, params, speed,
+    for i, speed in enumerate(settings.speeds_kmh):
+        progress(i / len(settings.speeds_kmh), f"Kalman filter and smoother, {speed:g} km/h")
+        shaping[speed] = shaping_filter(settings.track_class, speed / 3.6)
+        model = kalman_model(A, B, shaping[speed], settings.dt_s)
+        records = _simulate(vehicle, settings, speed, profiles)
+        speed_rows, examples[speed] = _speed_samples(vehicle, model, observer, settings, speed,
                                                      records, sensor_configs)
         rows += [r + ("sensor",) for r in speed_rows]
-        speed_rows, _ = _speed_samples(vehicle, model, observer, params, speed,
+        speed_rows, _ = _speed_samples(vehicle, model, observer, settings, speed,
                                        records.first(TRACK_NOISE_SEEDS), track_configs)
         rows += [r + ("track",) for r in speed_rows]
     samples = pd.DataFrame(rows, columns=["seed", "speed_kmh", "noise_fraction",
@@ -234,7 +235,7 @@ def compare(params: dict, progress=None) -> KalmanComparison:
     return KalmanComparison(samples=samples, examples=examples, shaping=shaping)
 
 
-def comparison_metrics(comparison: KalmanComparison, params: dict) -> dict:
+def comparison_metrics(comparison: KalmanComparison, settings: Settings) -> dict:
     """At the run's ``noise_fraction``, per speed ``<v>kmh``:
 
     * ``force_rms_error_ratio_{kalman,smoother}_<v>kmh``: RMS force error / RMS force of seed
@@ -243,15 +244,15 @@ def comparison_metrics(comparison: KalmanComparison, params: dict) -> dict:
       ``mc_seeds`` seeds with its 95 % order-statistic interval (``_low``, ``_high``, ``_n``).
     """
     s = comparison.samples
-    at = s[(s.sweep == "sensor") & (s.noise_fraction == float(params["noise_fraction"]))]
+    at = s[(s.sweep == "sensor") & (s.noise_fraction == float(settings.noise_fraction))]
     metrics = {}
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         lab = f"{speed:g}kmh"
         for name in ESTIMATORS:
             rows = at[(at.speed_kmh == speed) & (at.estimator == name)].sort_values("seed")
             if name != "observer":
                 metrics[f"force_rms_error_ratio_{name}_{lab}"] = float(
-                    rows[rows.seed == params["seed"]].ratio.iloc[0])
+                    rows[rows.seed == settings.seed].ratio.iloc[0])
             metrics.update(stats.median_interval(rows.ratio.to_numpy()).metrics(
                 f"mc_force_rms_error_ratio_{name}_{lab}"))
     return metrics

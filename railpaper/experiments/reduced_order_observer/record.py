@@ -19,7 +19,7 @@ from railpaper.experiments.reduced_order_observer.result import (
     Record,
     SpeedRun,
 )
-from railpaper.experiments.reduced_order_observer.spec import FRA_BAND_M
+from railpaper.experiments.reduced_order_observer.spec import FRA_BAND_M, Settings
 from railpaper.models import single_wheelset as sw
 from railpaper.settling import settling_time_s
 
@@ -44,7 +44,8 @@ def _simulate_hertz(vehicle, t_s, q_m, x0, substeps=4):
     return x
 
 
-def simulate_record(vehicle, params, distance_m, profile_m, speed_kmh, salt=()) -> Record:
+def simulate_record(vehicle, settings: Settings, distance_m, profile_m, speed_kmh,
+                    salt=()) -> Record:
     """Simulate the plant on the profile at one speed and add the sensor noise.
 
     The plant starts at static equilibrium on q(0); ``plant="linear"`` is exact for q linear
@@ -52,23 +53,23 @@ def simulate_record(vehicle, params, distance_m, profile_m, speed_kmh, salt=()) 
     :func:`noise_draws` of ``(seed, speed, *salt)``, scaled to ``noise_fraction`` of each
     measured channel's RMS (``track_noise_fraction`` of the RMS of q for the irregularity).
     """
-    dt, duration = params["dt_s"], params["duration_s"]
+    dt, duration = settings.dt_s, settings.duration_s
     t_s, q = track.wheelset_inputs(distance_m, profile_m, speed_kmh / 3.6, [0.0], dt, duration)
     q = q[:, 0]
-    noise_y, noise_q = noise_draws(params["seed"], speed_kmh, len(t_s), salt)
+    noise_y, noise_q = noise_draws(settings.seed, speed_kmh, len(t_s), salt)
     A, B = sw.state_space(vehicle)
     x0 = np.array([0.0, q[0], 0.0, q[0]])                 # static equilibrium on q(0)
-    if params["plant"] == "linear":
+    if settings.plant == "linear":
         x = simulate_foh(*foh(A, B, dt), q[:, None], x0)   # exact for q linear between samples
     else:
         x = _simulate_hertz(vehicle, t_s, q, x0)
     y = x[:, :2].copy()                                    # measured x1 = [ż_c, z_c]
-    y += noise_y * params["noise_fraction"] * np.sqrt(np.mean(y**2, axis=0))
-    q_meas = q + noise_q * params["track_noise_fraction"] * np.sqrt(np.mean(q**2))
+    y += noise_y * settings.noise_fraction * np.sqrt(np.mean(y**2, axis=0))
+    q_meas = q + noise_q * settings.track_noise_fraction * np.sqrt(np.mean(q**2))
     return Record(speed_kmh=float(speed_kmh), t_s=t_s, q_m=q, x_true=x, y_measured=y,
                   q_measured_m=q_meas,
-                  x2_initial=x[0, 2:] + np.array([0.0, params["initial_error_m"]]),
-                  force_true_N=sw.dynamic_contact_force_N(vehicle, x[:, 3], q, params["plant"]))
+                  x2_initial=x[0, 2:] + np.array([0.0, settings.initial_error_m]),
+                  force_true_N=sw.dynamic_contact_force_N(vehicle, x[:, 3], q, settings.plant))
 
 
 def run_observer(observer, vehicle, record: Record, threshold_m: float,
@@ -84,12 +85,13 @@ def run_observer(observer, vehicle, record: Record, threshold_m: float,
         displacement_rms_error_m=float(np.sqrt(np.mean(error[window] ** 2))))
 
 
-def simulate_speed(vehicle, observers, params, distance_m, profile_m, speed_kmh, salt=()) -> SpeedRun:
+def simulate_speed(vehicle, observers, settings: Settings, distance_m, profile_m, speed_kmh,
+                   salt=()) -> SpeedRun:
     """One run at one speed: :func:`simulate_record`, then both observers on it (SI units)."""
-    record = simulate_record(vehicle, params, distance_m, profile_m, speed_kmh, salt)
+    record = simulate_record(vehicle, settings, distance_m, profile_m, speed_kmh, salt)
     t_s, z_w = record.t_s, record.x_true[:, 3]
-    threshold = params["convergence_fraction"] * np.sqrt(np.mean(z_w ** 2))
-    window = t_s >= params["error_window_start_s"]
+    threshold = settings.convergence_fraction * np.sqrt(np.mean(z_w ** 2))
+    window = t_s >= settings.error_window_start_s
     error_free = np.empty((len(t_s), 2))                   # error dynamics alone: e[k+1] = Φ e[k]
     error_free[0] = record.x2_initial - record.x_true[0, 2:]
     for k in range(len(t_s) - 1):
@@ -104,16 +106,16 @@ def simulate_speed(vehicle, observers, params, distance_m, profile_m, speed_kmh,
            for form, obs in observers.items()})
 
 
-def all_speeds(params: dict) -> list[float]:
+def all_speeds(settings: Settings) -> list[float]:
     """Speeds of the main runs then of the sweep, without repeats, km/h (the run's order)."""
-    return list(dict.fromkeys(params["speeds_kmh"] + params["sweep_speeds_kmh"]))
+    return list(dict.fromkeys(settings.speeds_kmh + settings.sweep_speeds_kmh))
 
 
-def profile(params: dict, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def profile(settings: Settings, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Track profile (distance_m, irregularity_m) of one seed, long enough for every speed."""
-    length_m = max(max(all_speeds(params)) / 3.6 * params["duration_s"] + 10.0, 2 * FRA_BAND_M[1])
+    length_m = max(max(all_speeds(settings)) / 3.6 * settings.duration_s + 10.0, 2 * FRA_BAND_M[1])
     return track.synthesize_profile(
-        f"fra-{params['track_class']}", "vertical", length_m, 0.05, seed,
+        f"fra-{settings.track_class}", "vertical", length_m, 0.05, seed,
         wavelength_min_m=FRA_BAND_M[0], wavelength_max_m=FRA_BAND_M[1])
 
 

@@ -1,5 +1,6 @@
-"""Chapter ``reduced-order-observer``'s parameters (``SPEC``) and its vocabulary: the readings
-of P0, the track band, the estimators compared and the noise levels of the sensitivity table."""
+"""Chapter ``reduced-order-observer``'s parameters (``SPEC``, its typed ``Settings``) and its
+vocabulary: the readings of P0, the track band, the estimators compared and the noise levels of
+the sensitivity table."""
 
 from __future__ import annotations
 
@@ -51,12 +52,14 @@ SPEC = ChapterSpec(
         Parameter("seed", 0, "int", "seed of the track profile and the sensor noise", minimum=0),
         Parameter("mc_seeds", 200, "int",
                   "Monte Carlo seeds (seed, seed + 1 and so on; fewer than 1000) behind every claim verdict",
-                  quick=40, minimum=2),
+                  quick=40, minimum=2, changes_records=False),
         Parameter("side_tables", True, "bool",
                   "also compute the noise-sensitivity and linear-vs-Hertz tables and the Monte "
-                  "Carlo evidence (sweep samples switch them off: they need only the main runs)"),
+                  "Carlo evidence (sweep samples switch them off: they need only the main runs)",
+                  changes_records=False),
     ],
 )
+Settings = SPEC.settings_type
 
 
 #: Sensor-noise levels (fraction of channel RMS) of the noise-sensitivity table.

@@ -13,7 +13,7 @@ import pandas as pd
 from railpaper.data import data_path, load_quantities
 from railpaper.experiments.display import markdown, number, seconds  # noqa: F401 - re-exported
 from railpaper.experiments.reduced_order_observer import spec
-from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS
+from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS, Settings
 from railpaper.models import single_wheelset as sw
 
 
@@ -135,24 +135,24 @@ def percent(ratio: float) -> str:
     return f"{number(100 * ratio, 3)} %"
 
 
-def estimator_table(metrics: dict, params: dict) -> str:
+def estimator_table(metrics: dict, settings: Settings) -> str:
     """RMS force error / RMS force of each estimator at the run's sensor noise: median over the
     Monte Carlo seeds with its 95 % interval, one column per speed."""
     rows = []
     for name, label in ESTIMATORS.items():
         row = [label]
-        for speed in params["speeds_kmh"]:
+        for speed in settings.speeds_kmh:
             k = f"mc_force_rms_error_ratio_{name}_{speed:g}kmh"
             row.append(f"{percent(metrics[k])} [{number(100 * metrics[k + '_low'], 3)}, "
                        f"{number(100 * metrics[k + '_high'], 3)}]")
         rows.append(row)
-    n = metrics[f"mc_force_rms_error_ratio_kalman_{params['speeds_kmh'][0]:g}kmh_n"]
+    n = metrics[f"mc_force_rms_error_ratio_kalman_{settings.speeds_kmh[0]:g}kmh_n"]
     columns = ["estimator"] + [f"{s:g} km/h: RMS error / RMS force, median [95 % interval] over "
-                               f"{n} seeds" for s in params["speeds_kmh"]]
+                               f"{n} seeds" for s in settings.speeds_kmh]
     return markdown(pd.DataFrame(rows, columns=columns))
 
 
-def what_works(result, params: dict, transient_s: float = 0.1) -> dict[str, str]:
+def what_works(result, settings: Settings, transient_s: float = 0.1) -> dict[str, str]:
     """Numbers of the chapter's closing section, as text: at the first and the last of the run's
     speeds (``speed_first``, ``speed_last``) the estimators' median ratios with intervals
     (``<estimator>_first``, ``<estimator>_last``); at the first speed, the Kalman filter's
@@ -160,13 +160,13 @@ def what_works(result, params: dict, transient_s: float = 0.1) -> dict[str, str]
     estimator's RMS error over the first ``transient_s`` of seed ``seed``'s record
     (``transient_<estimator>``), relative to the RMS force over the error window."""
     m, out = result.metrics, {}
-    for which, speed in (("first", params["speeds_kmh"][0]), ("last", params["speeds_kmh"][-1])):
+    for which, speed in (("first", settings.speeds_kmh[0]), ("last", settings.speeds_kmh[-1])):
         out[f"speed_{which}"] = f"{speed:g} km/h"
         for name in ("observer", "kalman", "smoother"):
             k = f"mc_force_rms_error_ratio_{name}_{speed:g}kmh"
             out[f"{name}_{which}"] = (f"{percent(m[k])} [{number(100 * m[k + '_low'], 3)}, "
                                       f"{number(100 * m[k + '_high'], 3)} %]")
-    speed = params["speeds_kmh"][0]
+    speed = settings.speeds_kmh[0]
     s = result.estimators.samples
     track = s[(s.sweep == "track") & (s.speed_kmh == speed) & (s.estimator == "kalman")]
     for i, (fraction, t) in enumerate(track.groupby("track_noise_fraction")):
@@ -174,7 +174,7 @@ def what_works(result, params: dict, transient_s: float = 0.1) -> dict[str, str]
                              f"{number(fraction * t.q_rms_m.median() * 1e6, 2)} µm) gives "
                              f"{percent(t.ratio.median())}")
     e = result.estimators.examples[speed]
-    force_rms = np.sqrt(np.mean(e.force_true_N[e.t_s >= params["error_window_start_s"]] ** 2))
+    force_rms = np.sqrt(np.mean(e.force_true_N[e.t_s >= settings.error_window_start_s] ** 2))
     early = e.t_s < transient_s
     for name in ("observer", "kalman", "smoother"):
         error = getattr(e, f"{name}_N")[early] - e.force_true_N[early]

@@ -65,12 +65,12 @@ def test_convergence_time_matches_error_dynamics(quick_chapter_dir):
     """Independent expectation: e(t) = expm(F t) e0 against 5 % of the RMS of the true z_w."""
     out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
-    params = metrics["parameters"]
+    settings = SPEC.resolve(metrics["parameters"], quick=True)
     ts = pd.read_csv(out / "timeseries.csv")
     A, B = sw.state_space(sw.load_parameters())
-    F = roo.design(A, B, 2, params["observer_poles"]).F
+    F = roo.design(A, B, 2, settings.observer_poles).F
     t = ts.t_s.to_numpy()
-    e = np.array([expm(F * tk) @ [0.0, params["initial_error_m"]] for tk in t[::10]])[:, 1]
+    e = np.array([expm(F * tk) @ [0.0, settings.initial_error_m] for tk in t[::10]])[:, 1]
     for lab in ("60kmh", "100kmh"):
         z = ts[f"wheelset_displacement_true_m_{lab}"]
         predicted = settling_time_s(t[::10], np.abs(e) < 0.05 * np.sqrt(np.mean(z**2)))
@@ -82,7 +82,7 @@ def test_notebook_and_library_give_identical_metrics(quick_chapter_dir):
     library's (``chapter.run``), so ``railpaper bands`` and the claims read the same numbers."""
     out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())
-    direct = json.loads(json.dumps(chapter.run(quick=True, **SPEC.resolve({}, True)).metrics))
+    direct = json.loads(json.dumps(chapter.run(SPEC.resolve({}, True)).metrics))
     assert metrics["metrics"] == direct
     assert direct["mc_convergence_time_s_worst_wheel_n"] == 40         # quick: 40 seeds
     assert {"mc_trend_force_rms_rho_wheel", "mc_trend_force_rms_rho_wheelset",

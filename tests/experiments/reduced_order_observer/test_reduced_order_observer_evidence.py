@@ -25,8 +25,8 @@ SMALL = {"speeds_kmh": [60.0, 100.0], "sweep_speeds_kmh": [40.0, 100.0, 160.0], 
 
 @pytest.fixture(scope="module")
 def small():
-    params = SPEC.resolve(SMALL, quick=True)
-    return params, ev.monte_carlo(params)
+    settings = SPEC.resolve(SMALL, quick=True)
+    return settings, ev.monte_carlo(settings)
 
 
 def test_settled_indices_match_scalar_definition():
@@ -101,14 +101,14 @@ def test_batched_plant_and_observer_equal_single_runs(reading):
 
 
 def test_monte_carlo_sample_equals_single_run(small):
-    params, table = small
-    assert len(table) == params["mc_seeds"] * 4 * len(ev.READINGS)       # 4 distinct speeds
-    for seed in (params["seed"], params["seed"] + 2):
+    settings, table = small
+    assert len(table) == settings.mc_seeds * 4 * len(ev.READINGS)       # 4 distinct speeds
+    for seed in (settings.seed, settings.seed + 2):
         for reading in ev.READINGS:
-            single = chapter.run(quick=True, **dict(params, seed=seed, p0_basis=reading,
-                                                    side_tables=False)).metrics
+            single = chapter.run(settings.replace(seed=seed, p0_basis=reading,
+                                                  side_tables=False)).metrics
             rows = table[(table.seed == seed) & (table.reading == reading)].set_index("speed_kmh")
-            for speed in params["speeds_kmh"]:
+            for speed in settings.speeds_kmh:
                 lab, row = f"{speed:g}kmh", rows.loc[speed]
                 assert row.convergence_time_s == single[f"convergence_time_s_{lab}"]
                 assert row.force_rms_error_N == pytest.approx(single[f"force_rms_error_N_{lab}"],
@@ -118,27 +118,28 @@ def test_monte_carlo_sample_equals_single_run(small):
 
 
 def test_fixed_noise_equals_proportional_at_reference_speed(small):
-    params, table = small
-    ref = table[table.speed_kmh == params["speeds_kmh"][0]]
+    settings, table = small
+    ref = table[table.speed_kmh == settings.speeds_kmh[0]]
     np.testing.assert_allclose(ref.force_rms_error_N_fixed_noise, ref.force_rms_error_N, rtol=1e-12)
     other = table[table.speed_kmh == 160.0]
     assert not np.allclose(other.force_rms_error_N_fixed_noise, other.force_rms_error_N, rtol=1e-3)
 
 
 def test_evidence_metrics_recomputed_by_hand(small):
-    params, table = small
-    m = ev.evidence_metrics(table, params)
+    settings, table = small
+    m = ev.evidence_metrics(table, settings)
     speeds = [40.0, 60.0, 100.0, 160.0]
     for r in ev.READINGS:
         t = table[table.reading == r]
         wide = {c: t.pivot(index="seed", columns="speed_kmh", values=c) for c in
                 ("convergence_time_s", "force_rms_error_N_fixed_noise", "force_relative_rms_error")}
-        conv = wide["convergence_time_s"].where(wide["convergence_time_s"] >= 0, params["duration_s"])
-        worst = conv[params["speeds_kmh"]].max(axis=1).to_numpy()
+        conv = wide["convergence_time_s"].where(wide["convergence_time_s"] >= 0,
+                                                settings.duration_s)
+        worst = conv[list(settings.speeds_kmh)].max(axis=1).to_numpy()
         assert m[f"mc_convergence_time_s_worst_{r}"] == pytest.approx(np.median(worst))
-        assert m[f"mc_convergence_time_s_worst_{r}_n"] == params["mc_seeds"]
+        assert m[f"mc_convergence_time_s_worst_{r}_n"] == settings.mc_seeds
         assert m[f"mc_convergence_time_s_worst_{r}_low"] == worst.min()   # n = 4: [min, max]
-        worst_f = wide["force_relative_rms_error"][params["speeds_kmh"]].max(axis=1)
+        worst_f = wide["force_relative_rms_error"][list(settings.speeds_kmh)].max(axis=1)
         assert m[f"mc_force_relative_rms_error_worst_{r}"] == pytest.approx(np.median(worst_f))
         values = wide["force_rms_error_N_fixed_noise"][speeds].to_numpy()
         rhos = [st.spearmanr(speeds, row).statistic for row in values]
@@ -151,7 +152,7 @@ def test_evidence_metrics_recomputed_by_hand(small):
 
 
 def test_never_converged_counts_as_duration():
-    params = SPEC.resolve(dict(SMALL, sweep_speeds_kmh=[100.0]), quick=True)
+    settings = SPEC.resolve(dict(SMALL, sweep_speeds_kmh=[100.0]), quick=True)
     rows = []
     for seed in range(3):
         for speed, conv in ((60.0, 0.1), (100.0, -1.0 if seed == 0 else 0.2)):
@@ -160,9 +161,9 @@ def test_never_converged_counts_as_duration():
                              **{c: 1.0 + speed for c in ev.SAMPLE_COLUMNS},
                              "convergence_time_s": conv})
     table = pd.DataFrame(rows)
-    m = ev.evidence_metrics(table, params)
+    m = ev.evidence_metrics(table, settings)
     assert m["mc_convergence_time_s_worst_wheel"] == 0.2          # median of [0.6, 0.2, 0.2]
-    assert m["mc_convergence_time_s_worst_wheel_high"] == params["duration_s"]
+    assert m["mc_convergence_time_s_worst_wheel_high"] == settings.duration_s
     assert m["mc_convergence_never_wheel"] == 1
 
 
@@ -172,22 +173,22 @@ def test_hertz_linearisation_error_scales_with_the_irregularity_amplitude(small)
     (δ0 + δ)^(3/2) about δ0), so halving q halves it; no observer is involved, so the observer's
     initial error changes nothing; the Monte Carlo table holds the same number for its sample,
     under both readings of P0."""
-    params, table = small
-    distance_m, profile_m = record.profile(params, params["seed"])
-    t_s, q = track.wheelset_inputs(distance_m, profile_m, params["speeds_kmh"][0] / 3.6, [0.0],
-                                   params["dt_s"], params["duration_s"])
+    settings, table = small
+    distance_m, profile_m = record.profile(settings, settings.seed)
+    t_s, q = track.wheelset_inputs(distance_m, profile_m, settings.speeds_kmh[0] / 3.6, [0.0],
+                                   settings.dt_s, settings.duration_s)
     law = "force_relative_rms_error_hertz"
-    full, half = (ev._hertz_samples(params["p0_basis"], params, t_s, scale * q, [0])[law][0]
+    full, half = (ev._hertz_samples(settings.p0_basis, settings, t_s, scale * q, [0])[law][0]
                   for scale in (1.0, 0.5))
     assert 0 < half < full
     assert full / half == pytest.approx(2.0, rel=0.15)
-    assert ev._hertz_samples(params["p0_basis"], dict(params, initial_error_m=0.0), t_s, q,
+    assert ev._hertz_samples(settings.p0_basis, settings.replace(initial_error_m=0.0), t_s, q,
                              [0])[law][0] == full
     for reading in READINGS:
-        row = table[(table.seed == params["seed"]) & (table.reading == reading)
-                    & (table.speed_kmh == params["speeds_kmh"][0])]
-        one = ev._hertz_samples(reading, params, t_s, q, [0])
+        row = table[(table.seed == settings.seed) & (table.reading == reading)
+                    & (table.speed_kmh == settings.speeds_kmh[0])]
+        one = ev._hertz_samples(reading, settings, t_s, q, [0])
         for column in one:                                      # one column vs a batch
             assert row[column].iloc[0] == pytest.approx(one[column][0], rel=1e-9)
-    sweep_only = table[~table.speed_kmh.isin(params["speeds_kmh"])]
+    sweep_only = table[~table.speed_kmh.isin(settings.speeds_kmh)]
     assert sweep_only.force_relative_rms_error_hertz.isna().all()

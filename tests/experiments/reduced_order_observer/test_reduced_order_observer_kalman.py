@@ -102,9 +102,9 @@ def test_batch_of_models_equals_one_at_a_time(toy):
 
 @pytest.fixture(scope="module")
 def small():
-    params = SPEC.resolve(dict(duration_s=0.6, error_window_start_s=0.3, mc_seeds=4,
-                                       sweep_speeds_kmh=[60.0, 100.0]), quick=True)
-    return params, rk.compare(params)
+    settings = SPEC.resolve(dict(duration_s=0.6, error_window_start_s=0.3, mc_seeds=4,
+                                 sweep_speeds_kmh=[60.0, 100.0]), quick=True)
+    return settings, rk.compare(settings)
 
 
 def test_model_is_exact_discretisation():
@@ -124,13 +124,13 @@ def test_model_is_exact_discretisation():
 def test_chapter_record_against_filterpy(small):
     """The comparison's Kalman filter and smoother on seed `seed` at 60 km/h (the run's noise),
     rebuilt with filterpy from the record and the filter's documented assumptions."""
-    params, comparison = small
+    settings, comparison = small
     vehicle = sw.load_parameters()
     A, B = sw.state_space(vehicle)
-    model = rk.kalman_model(A, B, comparison.shaping[60.0], params["dt_s"])
-    R, P0 = rk.filter_covariances(model, [(params["noise_fraction"], 0.0)], params)
-    distance, profile = simulation.profile(params, params["seed"])
-    record = simulation.simulate_record(vehicle, params, distance, profile, 60.0)
+    model = rk.kalman_model(A, B, comparison.shaping[60.0], settings.dt_s)
+    R, P0 = rk.filter_covariances(model, [(settings.noise_fraction, 0.0)], settings)
+    distance, profile = simulation.profile(settings, settings.seed)
+    record = simulation.simulate_record(vehicle, settings, distance, profile, 60.0)
     z = np.column_stack([record.y_measured, record.q_measured_m])
     x0 = np.r_[z[0, :2], record.x2_initial, z[0, 2], 0.0]
     means, _, smoothed = _filterpy(model.F, model.Q, model.H, R[0], P0, x0, z)
@@ -146,11 +146,11 @@ def test_chapter_record_against_filterpy(small):
     np.testing.assert_allclose(example.force_true_N, record.force_true_N, atol=1e-6 * scale)
     np.testing.assert_allclose(example.kalman_N, k_r * (means[:, 3] - means[:, 4]),
                                atol=1e-5 * scale)
-    window = record.t_s >= params["error_window_start_s"]
+    window = record.t_s >= settings.error_window_start_s
     for est in ("kalman", "smoother"):
         ratio = comparison.samples.query(
-            f"sweep == 'sensor' and speed_kmh == 60 and noise_fraction == {params['noise_fraction']}"
-            f" and estimator == '{est}' and seed == {params['seed']}").ratio.iloc[0]
+            f"sweep == 'sensor' and speed_kmh == 60 and noise_fraction == {settings.noise_fraction}"
+            f" and estimator == '{est}' and seed == {settings.seed}").ratio.iloc[0]
         ref = {"kalman": means, "smoother": smoothed}[est]
         error = k_r * (ref[:, 3] - ref[:, 4]) - record.force_true_N
         expected = np.sqrt(np.mean(error[window] ** 2) / np.mean(record.force_true_N[window] ** 2))
@@ -158,36 +158,36 @@ def test_chapter_record_against_filterpy(small):
 
 
 def test_observer_samples_equal_the_monte_carlo_table(small):
-    params, comparison = small
-    mc = chapter.evidence.monte_carlo(params)
-    mc = mc[mc.reading == params["p0_basis"]].set_index(["seed", "speed_kmh"])
+    settings, comparison = small
+    mc = chapter.evidence.monte_carlo(settings)
+    mc = mc[mc.reading == settings.p0_basis].set_index(["seed", "speed_kmh"])
     s = comparison.samples
     at = s[(s.sweep == "sensor") & (s.estimator == "observer")
-           & (s.noise_fraction == params["noise_fraction"])]
+           & (s.noise_fraction == settings.noise_fraction)]
     for row in at.itertuples():
         assert row.ratio == pytest.approx(mc.loc[(row.seed, row.speed_kmh)].force_relative_rms_error,
                                           rel=1e-9)
 
 
 def test_metrics_are_the_samples(small):
-    params, comparison = small
-    m = rk.comparison_metrics(comparison, params)
+    settings, comparison = small
+    m = rk.comparison_metrics(comparison, settings)
     s = comparison.samples
-    for speed in params["speeds_kmh"]:
+    for speed in settings.speeds_kmh:
         lab = f"{speed:g}kmh"
         for est in ("observer", "kalman", "smoother"):
             at = s[(s.sweep == "sensor") & (s.estimator == est) & (s.speed_kmh == speed)
-                   & (s.noise_fraction == params["noise_fraction"])]
+                   & (s.noise_fraction == settings.noise_fraction)]
             assert m[f"mc_force_rms_error_ratio_{est}_{lab}"] == pytest.approx(np.median(at.ratio))
-            assert m[f"mc_force_rms_error_ratio_{est}_{lab}_n"] == params["mc_seeds"]
+            assert m[f"mc_force_rms_error_ratio_{est}_{lab}_n"] == settings.mc_seeds
             if est != "observer":
                 assert m[f"force_rms_error_ratio_{est}_{lab}"] == \
-                    at[at.seed == params["seed"]].ratio.iloc[0]
+                    at[at.seed == settings.seed].ratio.iloc[0]
     # the Kalman filter survives the paper's noise; the observer does not
     assert m["mc_force_rms_error_ratio_kalman_60kmh_high"] < 0.01
     assert m["mc_force_rms_error_ratio_observer_60kmh_low"] > 1.0
     levels = sorted(s[s.sweep == "sensor"].noise_fraction.unique())
-    assert levels == rk.noise_levels(params) and params["noise_fraction"] in levels
+    assert levels == rk.noise_levels(settings) and settings.noise_fraction in levels
     assert sorted(s[s.sweep == "track"].track_noise_fraction.unique()) == \
         sorted(rk.TRACK_NOISE_FRACTIONS)
 
@@ -199,11 +199,11 @@ def test_smoother_beats_filter_on_records_of_its_own_model(speed_kmh):
     record, so its error is below the filter's on every seed; an off-by-one between smoothed and
     filtered indices would break this.  (On the chapter's synthesised track the smoother loses
     a little: there the shaping filter is a fit, not the track's model.)"""
-    params = SPEC.resolve({}, quick=True)
+    settings = SPEC.resolve({}, quick=True)
     A, B = sw.state_space(sw.load_parameters())
-    model = rk.kalman_model(A, B, rk.shaping_filter(params["track_class"], speed_kmh / 3.6),
-                            params["dt_s"])
-    R, P0 = rk.filter_covariances(model, [(params["noise_fraction"], 0.0)], params)
+    model = rk.kalman_model(A, B, rk.shaping_filter(settings.track_class, speed_kmh / 3.6),
+                            settings.dt_s)
+    R, P0 = rk.filter_covariances(model, [(settings.noise_fraction, 0.0)], settings)
     T, S, n = 4000, 10, model.F.shape[0]
     rng = np.random.default_rng(11)
 

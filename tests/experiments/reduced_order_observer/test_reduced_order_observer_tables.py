@@ -19,8 +19,8 @@ SMALL = dict(duration_s=0.6, error_window_start_s=0.3, sweep_speeds_kmh=[60.0, 1
 
 @pytest.fixture(scope="module")
 def small():
-    params = SPEC.resolve(SMALL, quick=True)
-    return params, chapter.run(**params)
+    settings = SPEC.resolve(SMALL, quick=True)
+    return settings, chapter.run(settings)
 
 
 @pytest.mark.parametrize("value, text", [
@@ -43,24 +43,24 @@ def test_markdown_table_escapes_pipes_and_keeps_text_whole():
 
 
 def test_typed_results_are_the_metrics(small):
-    params, result = small
-    for speed in params["speeds_kmh"]:
+    settings, result = small
+    for speed in settings.speeds_kmh:
         run, lab = result.runs[speed], f"{speed:g}kmh"
         assert run.paper.force_rms_error_N == result.metrics[f"force_rms_error_N_{lab}"]
         assert run.paper.convergence_time_s == result.metrics[f"convergence_time_s_{lab}"]
         assert run.record.speed_kmh == speed and run.record.x_true.shape == (len(run.record.t_s), 4)
         np.testing.assert_array_equal(result.timeseries[f"wheel_rail_force_est_N_{lab}"],
                                       run.paper.force_est_N)
-    assert result.speed_sweep.speed_kmh.tolist() == params["sweep_speeds_kmh"]
+    assert result.speed_sweep.speed_kmh.tolist() == list(settings.sweep_speeds_kmh)
     assert not result.monte_carlo.empty and not result.noise_sweep.empty
-    assert np.allclose(np.sort(result.error_poles_per_s.real), np.sort(params["observer_poles"]))
+    assert np.allclose(np.sort(result.error_poles_per_s.real), np.sort(settings.observer_poles))
 
 
 def test_tables_render(small):
-    params, result = small
+    settings, result = small
     sweep = result.speed_sweep.copy()
     sweep.loc[0, "convergence_time_s"] = -1.0                      # a run that never converged
-    text = tables.speed_sweep_table(sweep, params["observer_form"])
+    text = tables.speed_sweep_table(sweep, settings.observer_form)
     assert "never" in text and "-1" not in text
     assert text.splitlines()[0] == "| quantity | 60 km/h | 100 km/h | 160 km/h |"
     for text in (tables.evidence_table(result.metrics), tables.rank_table(result.metrics),
@@ -72,19 +72,19 @@ def test_tables_render(small):
 
 
 def test_figures_fit_the_page(small):
-    params, result = small
-    for fig in (figures.displacement(result, params), figures.force(result, params, result.metrics),
-                figures.trends(result, params), figures.monte_carlo(result, params),
-                figures.force_error_vs_noise(result, params),
-                figures.force_estimates(result, params)):
+    settings, result = small
+    for fig in (figures.displacement(result, settings),
+                figures.force(result, settings, result.metrics), figures.trends(result, settings), figures.monte_carlo(result, settings),
+                figures.force_error_vs_noise(result, settings),
+                figures.force_estimates(result, settings)):
         assert fig.get_figwidth() <= 7.0
         matplotlib.pyplot.close(fig)
 
 
 def test_closing_numbers_are_the_metrics(small):
-    params, result = small
+    settings, result = small
     m = result.metrics
-    words = tables.what_works(result, params)
+    words = tables.what_works(result, settings)
     assert words["speed_first"] == "60 km/h" and words["speed_last"] == "100 km/h"
     k = "mc_force_rms_error_ratio_kalman_60kmh"
     assert words["kalman_first"].startswith(tables.percent(m[k]) + " [")
@@ -92,5 +92,5 @@ def test_closing_numbers_are_the_metrics(small):
     assert {f"track_{i}" for i in range(3)} <= set(words)
     for name in ("observer", "kalman", "smoother"):
         assert words[f"transient_{name}"].endswith("×")
-    text = tables.estimator_table(m, params)
+    text = tables.estimator_table(m, settings)
     assert "Kalman filter" in text and tables.percent(m[k]) in text
