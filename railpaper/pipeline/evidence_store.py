@@ -33,6 +33,7 @@ import hashlib
 import json
 import os
 import subprocess
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -182,13 +183,22 @@ class EvidenceStore:
         return picked
 
 
+def timed_rows(rows, settings: Any, seeds: tuple[int, ...]) -> tuple[pd.DataFrame, float]:
+    """``rows(settings, seeds)`` and the CPU seconds it took in the process that ran it."""
+    started = time.process_time()
+    frame = rows(settings, seeds)
+    return frame, time.process_time() - started
+
+
 def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str | None = None
                ) -> RecordMap:
     """A :data:`RecordMap` that reads ``store`` (None: no store), computes the missing records
     in this process or, with a dask ``client``, on its workers (one task per chunk), and appends
     each finished chunk to the store.  The progress callback counts records done across
-    workers."""
+    workers.  ``record_map.usage`` adds up the records computed and their CPU seconds (measured
+    where they ran)."""
     commit = commit or current_commit()
+    usage = {"records": 0, "cpu_s": 0.0}
 
     def record_map(study: RecordStudy, settings: Any, seeds: Sequence[int],
                    progress: ProgressCallback = no_progress) -> pd.DataFrame:
@@ -205,8 +215,11 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
         progress(done / max(total, 1), f"{study.name}: {done}/{total} records")
         chunks = study.chunks(missing)
 
-        def finished(chunk, frame):
+        def finished(chunk, result):
             nonlocal done
+            frame, cpu_s = result
+            usage["records"] += len(chunk)
+            usage["cpu_s"] += cpu_s
             frame = normalised(checked_rows(study, chunk, frame))
             if store is not None:
                 store.append(study, settings, frame, commit)
@@ -216,10 +229,10 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
 
         if client is None:
             for chunk in chunks:
-                finished(chunk, study.rows(settings, chunk))
+                finished(chunk, timed_rows(study.rows, settings, chunk))
         else:
             from distributed import as_completed
-            futures = {client.submit(study.rows, settings, chunk, pure=False): chunk
+            futures = {client.submit(timed_rows, study.rows, settings, chunk, pure=False): chunk
                        for chunk in chunks}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
@@ -228,6 +241,7 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
         table = pd.concat(frames, ignore_index=True).set_index("seed").loc[seeds].reset_index()
         return normalised(table)
 
+    record_map.usage = usage
     return record_map
 
 

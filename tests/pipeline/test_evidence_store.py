@@ -180,3 +180,11 @@ def test_an_unreachable_scheduler_is_one_line():
     with pytest.raises(PipelineError, match="cannot reach dask scheduler 'tcp://127.0.0.1:9'"):
         with records_on(scheduler="tcp://127.0.0.1:9"):
             pass
+
+
+def test_usage_counts_computed_records_only(tmp_path):
+    record_map = stored_map(EvidenceStore(tmp_path), commit="c1")
+    record_map(STUDY, SPEC.resolve(), range(5))
+    assert record_map.usage["records"] == 5 and record_map.usage["cpu_s"] >= 0.0
+    record_map(STUDY, SPEC.resolve(), range(6))                    # five reused, one computed
+    assert record_map.usage["records"] == 6
