@@ -119,6 +119,40 @@ def cmd_check(args) -> int:
     return 0
 
 
+def cmd_register(args) -> int:
+    from railpaper.pipeline.decisive import register_chapter
+    for chapter in args.chapters:
+        sizes, revised = register_chapter(chapter)
+        for key, size in sizes.items():
+            print(f"{key}: {'no sample' if size is None else f'{size} records'}")
+        if revised:
+            print(f"railpaper: {len(revised)} row(s) of {chapter} revised (the previous "
+                  f"declarations are kept in the registry): {', '.join(revised)}")
+    return 0
+
+
+def cmd_evidence(args) -> int:
+    from railpaper.pipeline.chapters import paper_chapters
+    from railpaper.pipeline.decisive import run_decisive
+    from railpaper.pipeline.sweep import close_client, make_client
+    if not args.decisive:
+        raise ValueError("evidence needs --decisive (every ledger row at its registered size)")
+    chapters = args.chapters or paper_chapters()
+    client = cluster = None
+    if args.workers or args.scheduler:
+        client, cluster = make_client(args.scheduler, args.workers)
+    try:
+        done = run_decisive(chapters, client=client, workers=args.workers or 1,
+                            progress=lambda line: print(line, file=sys.stderr, flush=True))
+    finally:
+        if client is not None:
+            close_client(client, cluster)
+    for item in done:
+        state = item.skipped or f"{item.size} records"
+        print(f"{item.chapter} {item.study}: {state}")
+    return 0
+
+
 def cmd_compare(args) -> int:
     from railpaper.pipeline.compare import compare_runs, format_comparison
     if args.out is not None and (args.out.suffix != ".csv" or not args.out.parent.is_dir()):
@@ -253,6 +287,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("chapters", nargs="*")
     p.add_argument("--out", type=Path, help="run directory to check (one chapter only)")
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("register", help="fix the declared claims' sample sizes by power and "
+                       "record their fingerprints (data/claims_registry.json)")
+    p.add_argument("chapters", nargs="+")
+    p.set_defaults(func=cmd_register)
+
+    p = sub.add_parser("evidence", help="compute the stored decisive evidence (data/evidence)")
+    p.add_argument("--decisive", action="store_true",
+                   help="every declared row's study at its registered size")
+    p.add_argument("chapters", nargs="*", help="default: every paper chapter")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="K", help="K local worker processes")
+    where.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask cluster")
+    p.set_defaults(func=cmd_evidence)
 
     p = sub.add_parser("compare", help="two runs of a chapter side by side: parameters, metrics, "
                        "verdicts")

@@ -24,8 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from railpaper.data import DataError, read_toml
+from railpaper.rulebook import Vocabulary
 from railpaper.pipeline.chapters import chapter_spec, default_output_dir
 from railpaper.pipeline.claim_rules import rule_metrics
+from railpaper.pipeline.decisive import check_provenance
+from railpaper.pipeline.declarations import check_registry, load_declarations, load_registry
 from railpaper.pipeline.findings import read_findings
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
@@ -89,8 +92,23 @@ def read_metrics(path: Path, chapter: str) -> dict:
     return run
 
 
+def registry_rows(chapter: str) -> list[CheckRow]:
+    """FAIL rows for the chapter's declarations the registry does not hold as they are now
+    (a revision not registered) and for stored decisive evidence that does not match its
+    provenance or the chapter's settings."""
+    vocabulary = Vocabulary.load()
+    problems = check_registry(load_declarations(chapter, vocabulary), vocabulary, load_registry())
+    problems += check_provenance(chapter)
+    return [CheckRow(chapter, "registry", "-", "-", f"FAIL: {line}") for line in problems]
+
+
 def check_chapter(chapter: str, out_dir: str | Path | None = None) -> list[CheckRow]:
-    """Rows of the check table for one chapter's last run."""
+    """Rows of the check table for one chapter's last run, after :func:`registry_rows`."""
+    registry = registry_rows(chapter)
+    return registry + _check_run(chapter, out_dir)
+
+
+def _check_run(chapter: str, out_dir: str | Path | None = None) -> list[CheckRow]:
     spec = chapter_spec(chapter)
     path = Path(out_dir or default_output_dir(chapter)) / "metrics.json"
     if not path.exists():

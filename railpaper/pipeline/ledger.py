@@ -25,7 +25,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
+import pandas as pd
+
 from railpaper.data import read_toml
+from railpaper.experiments.records import RecordStudy
 from railpaper.paths import DATA_DIR
 from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.claim_rules import (
@@ -38,7 +41,10 @@ from railpaper.pipeline.claim_rules import (
     verdict_as_written,
     verdict_on_run,
 )
+from railpaper.pipeline.declarations import decide, load_declarations, load_registry
+from railpaper.pipeline.evidence_store import EvidenceStore
 from railpaper.pipeline.ledger_figure import plot_ledger
+from railpaper.rulebook import Decision, Vocabulary
 from railpaper.pipeline.outputs import claims
 
 VERDICTS = RULE_VERDICTS + ("missing",)
@@ -47,7 +53,8 @@ VERDICT_ICONS = {"reproduced": "✔", "attainable": "◇", "artefact": "⚠", "d
                  "undecided": "?", "not testable": "∅", "missing": "–"}
 CSV_COLUMNS = ["chapter", "claim", "reading", "kind", "method", "headline", "paper_value", "ours",
                "ours_low", "ours_high", "n_samples", "min_samples", "verdict", "reason",
-               "revised_after_evidence", "verdict_under_original_rule"]
+               "revised_after_evidence", "verdict_under_original_rule", "procedure", "words",
+               "horizon", "central", "fingerprint", "evidence"]
 
 
 @dataclass
@@ -82,6 +89,12 @@ class LedgerRow:
     revised: str = ""
     original_verdict: str = ""
     reference: object = None
+    procedure: str = ""
+    words: str = ""
+    horizon: str = ""
+    central: bool = False
+    fingerprint: str = ""
+    evidence: str = ""
 
 
 def claims_label(chapter: str) -> str:
@@ -230,13 +243,76 @@ def _read_json(path: Path) -> dict | None:
 
 def run_rows(chapter: str, out_dir: str | Path, data_dir: str | Path | None = None
              ) -> tuple[list[LedgerRow], dict | None]:
-    """Ledger rows of the run in ``out_dir`` and its ``metrics.json`` (None if not run)."""
+    """Ledger rows of the run in ``out_dir`` and its ``metrics.json`` (None if not run): from
+    the chapter's declarations under the rulebook where it has them
+    (:func:`railpaper.pipeline.verdicts.declared_rows`), else from its v2 rules."""
     data = Path(data_dir) if data_dir else DATA_DIR
     out = Path(out_dir)
     run = _read_json(out / "metrics.json")
-    rows = chapter_rows(chapter, read_toml(data / chapter / "claims.toml"), run,
-                        _read_json(out / "timings.json"))
+    timings = _read_json(out / "timings.json")
+    if (data / chapter / "declarations.toml").exists():
+        return declared_rows(chapter, out, run, timings, data), run
+    rows = chapter_rows(chapter, read_toml(data / chapter / "claims.toml"), run, timings)
     return rows, run
+
+
+#: Where the decisive evidence of the repository lives (``railpaper evidence --decisive``).
+DECISIVE_EVIDENCE_DIR = DATA_DIR / "evidence"
+
+
+def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int | None
+               ) -> tuple[pd.DataFrame | None, str]:
+    """The per-record rows a declared row is decided on, and where they come from: this run's
+    ``records_<study>.csv``, or — where the run holds fewer records than the registered
+    ``size`` — the stored decisive evidence for the run's settings when it holds enough."""
+    path = out / f"records_{study}.csv"
+    mine = pd.read_csv(path) if path.exists() else None
+    if size is None or (mine is not None and len(mine) >= size) or run is None:
+        return mine, f"this run ({0 if mine is None else len(mine)} records)"
+    settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
+    store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
+    stored = store.read(RecordStudy(chapter, study, rows=None), settings)
+    if len(stored) >= size:
+        folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
+        return (stored.drop(columns="commit"),
+                f"{folder.relative_to(DATA_DIR.parent)} ({len(stored)} records)")
+    return mine, f"this run ({0 if mine is None else len(mine)} records)"
+
+
+def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | None,
+                  data_dir: Path = DATA_DIR) -> list[LedgerRow]:
+    """The ledger rows of a chapter declared under the rulebook: each declaration decided by
+    its class's procedure (:func:`railpaper.pipeline.declarations.decide`) at its registered
+    size, with the registry's fingerprint and the evidence it read."""
+    vocabulary = Vocabulary.load()
+    registry = load_registry()
+    values = dict((timings or {}).get("metrics", {}))
+    values.update((run or {}).get("metrics", {}))
+    rows = []
+    for d in load_declarations(chapter, vocabulary, data_dir / chapter / "declarations.toml"):
+        entry = registry.get(d.key, {})
+        size = entry.get("size")
+        if run is None:
+            decision, evidence = Decision("undecided", "the chapter has not been run"), ""
+            verdict = "missing"
+        else:
+            table, evidence = (study_rows(chapter, d.study, out, run, size) if d.study
+                               else (None, "this run"))
+            decision, verdict = decide(d, vocabulary, table, values, size), ""
+        verdict = verdict or decision.verdict
+        paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
+                 else d.direction or "(no number)")
+        ours = ("—" if decision.statistic is None else f"{decision.statistic:.3g}" + (
+            f" [{decision.low:.3g}, {decision.high:.3g}]" if decision.low is not None else "")
+            + (f", n = {decision.n}" if decision.n else ""))
+        rows.append(LedgerRow(chapter, d.id, d.claim, d.source, paper, ours, verdict,
+                              decision.reason, d.reading, d.id.split("__")[0], d.word_class,
+                              list(d.paper_value) or None, decision.statistic, decision.low,
+                              decision.high, decision.n, d.kind, "", size, d.central,
+                              procedure=d.procedure, words=d.words, horizon=d.horizon,
+                              central=d.central, fingerprint=entry.get("fingerprint", ""),
+                              evidence=evidence))
+    return rows
 
 
 def build_ledger(chapters: list[str], chapters_dir: str | Path,
@@ -482,7 +558,9 @@ def write_ledger_csv(rows: list[LedgerRow], path: str | Path) -> Path:
                              *("" if v is None else repr(v) if isinstance(v, float) else v
                                for v in (r.ours_value, r.ours_low, r.ours_high, r.n_samples)),
                              "" if r.min_samples is None else r.min_samples,
-                             r.verdict, r.reason, r.revised, r.original_verdict])
+                             r.verdict, r.reason, r.revised, r.original_verdict,
+                             r.procedure or "v2 rule", r.words, r.horizon,
+                             str(r.central).lower(), r.fingerprint, r.evidence])
     return path
 
 

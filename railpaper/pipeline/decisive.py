@@ -1,0 +1,235 @@
+"""Registered sample sizes and the decisive evidence the book's ledger reads.
+
+Two steps, in this order, each a command:
+
+1. ``railpaper register CHAPTER`` fixes every declared row's sample size by power before any
+   deciding run (:func:`railpaper.pipeline.declarations.registered_size`): rates and single-run
+   rows from the vocabulary alone; paired changes and equivalences from the per-record σ of the
+   effect on *pilot* records, seeds :data:`PILOT_SEED` onwards, never used to decide.  The sizes
+   and fingerprints go to the registry (``data/claims_registry.json``).
+2. ``railpaper evidence --decisive`` computes each study at the largest size its rows registered
+   (seeds from the chapter's own first seed, the records the book's run also starts with) into
+   ``data/evidence/<chapter>/`` (:class:`~railpaper.pipeline.evidence_store.EvidenceStore`),
+   with a ``provenance.json`` per chapter.  A study whose size would take the whole run past
+   :data:`CPU_BUDGET_S` (estimated from its first chunk) is left out, and the ledger says what
+   its rows would need.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from railpaper.experiments import load_chapter
+from railpaper.experiments.records import RecordStudy, map_in_process
+from railpaper.paths import DATA_DIR
+from railpaper.pipeline.chapters import PipelineError, chapter_spec
+from railpaper.pipeline.declarations import (
+    Declaration,
+    load_declarations,
+    load_registry,
+    register,
+    registered_size,
+    write_registry,
+)
+from railpaper.pipeline.evidence_store import EvidenceStore, current_commit, stored_map
+from railpaper.rulebook import Vocabulary
+
+#: First seed of the pilot records behind the sizes of continuous statistics: far from every
+#: seed a chapter's run or the decisive evidence uses.
+PILOT_SEED = 900_000
+#: Pilot records per study.
+PILOT_RECORDS = 30
+#: CPU time the whole decisive run may take (the issue's two CPU-hours).
+CPU_BUDGET_S = 2 * 3600.0
+DECISIVE_DIR = DATA_DIR / "evidence"
+
+
+def chapter_studies(chapter: str) -> dict[str, RecordStudy]:
+    """The chapter's per-record studies by name (its module's ``STUDIES``)."""
+    studies = getattr(load_chapter(chapter), "STUDIES", None)
+    if not studies:
+        raise PipelineError(f"chapter '{chapter}' exposes no per-record studies (STUDIES)")
+    return {study.name: study for study in studies}
+
+
+def first_seed(chapter: str, settings: Any) -> int:
+    """The first record of the chapter's Monte Carlo (its module's ``first_record``, else the
+    settings' ``seed``)."""
+    module = load_chapter(chapter)
+    return int(module.first_record(settings)) if hasattr(module, "first_record") \
+        else int(settings.seed)
+
+
+def pilot_sigma(declaration: Declaration, rows) -> float:
+    """The per-record σ of a row's effect on pilot rows: for a paired change or equivalence of
+    [A, B], the delta method's ``sd((B − A) − r A) / |mean A|``; for deviations, their sd."""
+    if len(declaration.metrics) == 1:
+        return float(np.std(rows[declaration.metrics[0]].to_numpy(float), ddof=1))
+    a = rows[declaration.metrics[0]].to_numpy(float)
+    b = rows[declaration.metrics[1]].to_numpy(float)
+    r = float(np.mean(b - a)) / float(np.mean(a))
+    return float(np.std((b - a) - r * a, ddof=1)) / abs(float(np.mean(a)))
+
+
+def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
+                     pilot_records: int = PILOT_RECORDS) -> tuple[dict[str, int | None], list[str]]:
+    """Sizes of every declared row by power (pilot records for continuous statistics) written
+    to the registry with the rows' fingerprints; returns the sizes and the revised keys."""
+    vocabulary = Vocabulary.load()
+    rows = load_declarations(chapter, vocabulary)
+    if not rows:
+        raise PipelineError(f"chapter '{chapter}' has no data/{chapter}/declarations.toml")
+    settings = chapter_spec(chapter).resolve({}, quick)
+    pilots: dict[str, Any] = {}
+    sizes = {}
+    for d in rows:
+        sigma = None
+        if d.procedure in ("paired-change", "equivalence"):
+            if d.study not in pilots:
+                study = chapter_studies(chapter)[d.study]
+                pilots[d.study] = map_in_process(study, settings, range(
+                    PILOT_SEED, PILOT_SEED + pilot_records))
+            sigma = pilot_sigma(d, pilots[d.study])
+        sizes[d.key] = registered_size(d, vocabulary, sigma)
+    registry, revised = register(rows, vocabulary, load_registry(), sizes,
+                                 date or datetime.date.today().isoformat())
+    write_registry(registry)
+    return sizes, revised
+
+
+def machine() -> dict[str, Any]:
+    """CPU model, cores, BLAS and versions of the machine that computed the evidence."""
+    cpu = platform.processor()
+    try:
+        with open("/proc/cpuinfo") as handle:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in handle
+                        if ln.startswith("model name")), cpu)
+    except OSError:
+        pass
+    config = np.show_config(mode="dicts")
+    blas = config.get("Build Dependencies", {}).get("blas", {})
+    return {"cpu": cpu, "cores": os.cpu_count(),
+            "blas": f"{blas.get('name', '?')} {blas.get('version', '')}".strip(),
+            "python": platform.python_version(), "numpy": np.__version__}
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """One study of the decisive run: its size and seeds, or why it is left out."""
+
+    chapter: str
+    study: str
+    size: int
+    first: int
+    cpu_s_per_record: float | None = None
+    skipped: str = ""
+
+
+def plan(chapters: list[str]) -> list[StudyPlan]:
+    """Every study the registered rows read, at the largest size registered for it."""
+    registry, vocabulary = load_registry(), Vocabulary.load()
+    plans = []
+    for chapter in chapters:
+        settings = chapter_spec(chapter).resolve({}, False)
+        sizes: dict[str, int] = {}
+        for d in load_declarations(chapter, vocabulary):
+            size = registry.get(d.key, {}).get("size")
+            if d.study and size:
+                sizes[d.study] = max(size, sizes.get(d.study, 0))
+        plans += [StudyPlan(chapter, study, size, first_seed(chapter, settings))
+                  for study, size in sizes.items()]
+    return plans
+
+
+def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=print,
+                 budget_s: float = CPU_BUDGET_S, root: Path = DECISIVE_DIR) -> list[StudyPlan]:
+    """Compute every planned study into ``root`` (rows already there are reused after their
+    spot check), writing ``<root>/<chapter>/provenance.json``; a study whose estimated CPU time
+    (its first chunk's per record × its size) would take the run past ``budget_s`` is left out
+    and reported."""
+    store, commit = EvidenceStore(root), current_commit()
+    record_map = stored_map(store, client=client, commit=commit)
+    done, spent = [], 0.0
+    for item in plan(chapters):
+        settings = chapter_spec(item.chapter).resolve({}, False)
+        study = chapter_studies(item.chapter)[item.study]
+        seeds = list(range(item.first, item.first + item.size))
+        probe = seeds[:study.chunk_records]
+        before = dict(record_map.usage)
+        record_map(study, settings, probe)                   # in the store; reused below
+        computed = record_map.usage["records"] - before["records"]
+        per_record = ((record_map.usage["cpu_s"] - before["cpu_s"]) / computed if computed
+                      else _stored_cpu_per_record(root / item.chapter, item.study))
+        estimate = per_record * item.size
+        if spent + estimate > budget_s:
+            done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record,
+                                     "skipped": f"needs about {estimate / 3600:.2f} CPU-hours"}))
+            progress(f"railpaper: {item.chapter} {item.study}: left out, {done[-1].skipped}")
+            continue
+        before, started = dict(record_map.usage), time.perf_counter()
+        record_map(study, settings, seeds,
+                   lambda fraction, message: progress(f"railpaper: {item.chapter} {message}"))
+        wall = time.perf_counter() - started
+        cpu = record_map.usage["cpu_s"] - before["cpu_s"]
+        spent += cpu
+        done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record}))
+        _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
+    return done
+
+
+def _stored_cpu_per_record(folder: Path, study: str) -> float:
+    """CPU seconds per record of a study already in the store (its provenance), else 0."""
+    path = folder / "provenance.json"
+    if path.exists():
+        entry = json.loads(path.read_text()).get("studies", {}).get(study)
+        if entry and entry.get("records"):
+            return entry["cpu_s"] / entry["records"]
+    return 0.0
+
+
+def _write_provenance(folder: Path, item: StudyPlan, settings, commit: str, workers: int,
+                      wall_s: float, cpu_s: float) -> None:
+    path = folder / "provenance.json"
+    record = json.loads(path.read_text()) if path.exists() else {"studies": {}}
+    record.update(commit=commit, date=datetime.date.today().isoformat(),
+                  settings=settings.as_dict(), machine=machine())
+    record["studies"][item.study] = {"seeds": [item.first, item.first + item.size],
+                                     "records": item.size, "workers": workers,
+                                     "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1)}
+    folder.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+
+
+def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
+    """One line per problem of a chapter's stored evidence: a provenance whose settings are not
+    the chapter's defaults, or a study whose stored rows are fewer than it says."""
+    path = root / chapter / "provenance.json"
+    if not path.exists():
+        return []
+    record = json.loads(path.read_text())
+    problems = []
+    defaults = chapter_spec(chapter).resolve({}, False)
+    if record.get("settings") != defaults.as_dict():
+        problems.append(f"{path}: its settings are not the chapter's defaults; regenerate with "
+                        "'railpaper evidence --decisive'")
+    store = EvidenceStore(root)
+    for name, study in record.get("studies", {}).items():
+        rows = store.read(RecordStudy(chapter, name, rows=None), defaults)
+        if len(rows) < study["records"]:
+            problems.append(f"{path}: study {name} holds {len(rows)} of its {study['records']} "
+                            "records")
+    return problems
+
+
+__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "chapter_studies",
+           "check_provenance", "first_seed", "machine", "pilot_sigma", "plan",
+           "register_chapter", "run_decisive"]

@@ -1,0 +1,44 @@
+"""The decisive evidence's pieces that need no chapter run: the pilot σ behind a registered
+size, and the provenance check."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from railpaper.pipeline import decisive
+from railpaper.pipeline.declarations import parse
+from railpaper.rulebook import Vocabulary, relative_change
+
+VOCABULARY = Vocabulary.load()
+ROW = {"id": "x", "claim": "c", "words": "w", "source": "s", "kind": "population",
+       "word_class": "trend", "study": "monte_carlo", "metrics": ["a", "b"],
+       "direction": "increase", "central": False}
+
+
+def test_pilot_sigma_is_the_delta_methods_per_record_sd():
+    a, b = np.array([10.0, 12.0, 11.0, 13.0]), np.array([13.0, 15.0, 14.0, 16.0])
+    sigma = decisive.pilot_sigma(parse("demo", ROW, VOCABULARY), pd.DataFrame({"a": a, "b": b}))
+    assert sigma == pytest.approx((3 / 11.5) * math.sqrt(5 / 3) / 11.5)       # by hand
+    r, low, high = relative_change(a, b)        # the same σ makes the interval's half-width
+    assert (high - low) / 2 == pytest.approx(3.182446305284263 * sigma / math.sqrt(4))
+    one = parse("demo", dict(ROW, word_class="similarity", metrics=["d"], direction=""),
+                VOCABULARY)
+    assert decisive.pilot_sigma(one, pd.DataFrame({"d": [0.1, 0.3]})) == pytest.approx(
+        math.sqrt(0.02))
+
+
+def test_provenance_must_match_the_defaults(tmp_path):
+    chapter = "reduced-order-observer"
+    assert decisive.check_provenance(chapter, tmp_path) == []             # nothing stored
+    (tmp_path / chapter).mkdir()
+    path = tmp_path / chapter / "provenance.json"
+    path.write_text(json.dumps({"settings": {"seed": 3}, "studies": {
+        "monte_carlo": {"records": 5, "seeds": [0, 5]}}}))
+    problems = decisive.check_provenance(chapter, tmp_path)
+    assert "not the chapter's defaults" in problems[0]
+    assert "holds 0 of its 5 records" in problems[1]
