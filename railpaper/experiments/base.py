@@ -263,8 +263,6 @@ class ChapterResult:
         First column ``t_s`` (or ``step`` where the chapter says so), units in column names.
     extra_tables : dict of str to DataFrame
         Other CSV outputs (e.g. ``toy_timeseries``), written as ``<key>.csv``.
-    data : dict
-        Anything else the notebook plots (arrays, tables).
     extra_files : dict of str to str
         Other text outputs, written verbatim as the file named by the key (e.g.
         ``toy_posterior.json``).
@@ -274,7 +272,6 @@ class ChapterResult:
     timings: dict[str, float] = field(default_factory=dict)
     timeseries: pd.DataFrame | None = None
     extra_tables: dict[str, pd.DataFrame] = field(default_factory=dict)
-    data: dict[str, Any] = field(default_factory=dict)
     extra_files: dict[str, str] = field(default_factory=dict)
 
 
