@@ -12,7 +12,6 @@ are stopped (SIGTERM: each removes its staging directory) and the error names th
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -25,12 +24,6 @@ from railpaper.pipeline.chapters import PipelineError, ensure_kernel, run_chapte
 #: a two-job build: 332 s, about 300 s, 105 s, 70 s, 25 s); a chapter not listed starts last.
 LONGEST_FIRST = ("rbpf-parameter-estimation", "quasi-gaussian-rbpf", "suspension-fault-detection",
                  "reduced-order-observer", "partial-state-observer")
-
-#: Set for the chapters of a build that runs several at once: a chapter's Monte Carlo sweep
-#: (:func:`railpaper.pipeline.sweep.notebook_sweep`) then uses one worker process, the one core
-#: the chapter has, instead of one per core of the machine (two workers beside another chapter
-#: shared one core: chapter 004's 250 records took 322 s instead of about 150 s).
-SWEEP_WORKERS_VARIABLE = "RAILPAPER_SWEEP_WORKERS"
 
 
 def _log_path(out: Path) -> Path:
@@ -54,9 +47,10 @@ def run_chapters(names: list[str], quick: bool, out_dirs: dict[str, Path], jobs:
                 log = open(_log_path(out), "w")
                 command = [sys.executable, "-m", "railpaper.pipeline.chapter_process", name,
                            str(out)] + (["--quick"] if quick else [])
-                env = dict(os.environ, **({SWEEP_WORKERS_VARIABLE: "1"} if jobs > 1 else {}))
-                running[name] = (subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
-                                                  env=env), time.monotonic(), log)
+                # a chapter's records run in its own process unless the build was given
+                # --workers or --scheduler (evidence_store.records_on): then on those workers
+                running[name] = (subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT),
+                                 time.monotonic(), log)
                 say(f"railpaper: running chapter {name}{' (quick)' if quick else ''} "
                     f"({len(running)} running)")
             time.sleep(0.2)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -30,7 +29,6 @@ import pandas as pd
 
 from railpaper.experiments import load_chapter
 from railpaper.experiments.base import ChapterSpec, ParameterError, check_metrics
-from railpaper.pipeline.chapter_process import SWEEP_WORKERS_VARIABLE
 from railpaper.pipeline.chapters import PipelineError, chapter_spec
 from railpaper.pipeline.sweep_table import (RESERVED_COLUMNS, load_results, sample_key,
                                             summarise, write_csv_atomic)
@@ -345,46 +343,6 @@ def run_sweep(chapter: str, grid: dict[str, list], seeds: str | Iterable[int],
     write_csv_atomic(everything, out / "results.csv")
     frame = everything[everything["sample"].isin(keys)].reset_index(drop=True)
     write_csv_atomic(summarise(frame, list(grid)), out / "summary.csv")
-    return frame
-
-
-def sweep_workers() -> int:
-    """Local workers a notebook's sweep gets: ``RAILPAPER_SWEEP_WORKERS`` (1 when chapters run
-    side by side, :mod:`railpaper.pipeline.chapter_process`), else one per core.  With one worker
-    a notebook may run its samples in its own process instead: the same numbers, without a
-    scheduler and a results file rewritten after every sample on the same core."""
-    return int(os.environ.get(SWEEP_WORKERS_VARIABLE, "0")) or os.cpu_count() or 1
-
-
-def notebook_sweep(chapter: str, params: dict[str, Any], seeds: Iterable[int],
-                   out_dir: str | Path, *, grid: dict[str, list] | None = None,
-                   quick: bool = False, require_ok: bool = False,
-                   workers: int | None = None) -> pd.DataFrame:
-    """A chapter notebook's Monte Carlo samples as a fresh sweep, without progress lines.
-
-    ``workers`` defaults to the environment's ``RAILPAPER_SWEEP_WORKERS`` (set to 1 by
-    :mod:`railpaper.pipeline.chapter_process` when chapters run side by side), else one per core.
-
-    Every sample is ``params`` (the chapter's resolved parameters; its seed is ignored) with one
-    of ``seeds`` and one combination of ``grid`` values.  ``out_dir`` is emptied first: its
-    samples belong to this run's parameters.
-
-    Raises
-    ------
-    PipelineError
-        With ``require_ok``, if any sample failed (the first error is in the message).
-    """
-    grid = dict(grid or {})
-    fixed = {k: v for k, v in params.items() if k not in grid and k != SEED_PARAMETER}
-    if workers is None:         # a chapter of a several-at-once build has one core: one worker
-        workers = sweep_workers()
-    shutil.rmtree(out_dir, ignore_errors=True)
-    frame = run_sweep(chapter, grid, seeds, out_dir, fixed=fixed, quick=quick, workers=workers,
-                      progress=False)
-    failed = frame[frame.status != "ok"]
-    if require_ok and len(failed):
-        raise PipelineError(f"{len(failed)} of {len(frame)} Monte Carlo samples of {chapter} "
-                            f"failed; first: {failed.error.iloc[0]}")
     return frame
 
 

@@ -162,34 +162,3 @@ def test_refuses_a_directory_of_another_sweep(tmp_path):
     with pytest.raises(PipelineError, match="holds a sweep of"):
         run_sweep(CHAPTER, {}, "0:1", out, progress=False)            # full, not quick
     assert sorted(p.name for p in out.iterdir()) == ["sweep.json"]
-
-
-def test_chapter_monte_carlo_on_sweep_workers_equals_in_process(tmp_path):
-    """Paper 004's chapter runs its Monte Carlo records as a sweep of single-record runs (the
-    notebook's path): same table and metrics, bit for bit, as running the records in-process;
-    and each sample's row is what ``run`` gives for that record alone."""
-    from railpaper.experiments.quasi_gaussian_rbpf import experiment as qg
-    from railpaper.pipeline.sweep import notebook_sweep
-    small = qg.SPEC.resolve(dict(n_particles=40, n_steps=30, grid_size=11, n_monte_carlo=3,
-                                 record=2, timing=False, readings_records=0), True)
-    frames = []
-
-    def on_workers(settings, records, progress):
-        sample = settings.replace(n_monte_carlo=1, timing=False, readings_records=0)
-        frame = notebook_sweep(qg.SPEC.name, sample.as_dict(), [settings.seed],
-                               tmp_path / "mc", grid={"record": records}, quick=True,
-                               require_ok=True, workers=1)
-        frames.append(frame)
-        return frame.rename(columns={"record": "replicate"})
-
-    in_process = qg.run(small)
-    on_sweep = qg.run(small, monte_carlo=on_workers)
-    assert in_process.metrics == on_sweep.metrics
-    pd.testing.assert_frame_equal(in_process.monte_carlo, on_sweep.monte_carlo)
-    assert on_sweep.monte_carlo.replicate.tolist() == [2, 3, 4]
-    assert frames[0].record.tolist() == [3, 4] and (frames[0].status == "ok").all()
-    alone = qg.run(small.replace(record=4, n_monte_carlo=1)).metrics
-    row = on_sweep.monte_carlo.iloc[2]
-    assert all(row[k] == alone[k] for k in row.index if k != "replicate")
-    with pytest.raises(ValueError, match="records incomplete"):
-        qg.run(small, monte_carlo=lambda settings, r, _: on_workers(settings, r[:1], _))

@@ -1,6 +1,8 @@
 """Monte Carlo evidence of chapter ``quasi-gaussian-rbpf``: the statistics its claim rules read.
 
-Input is the chapter's Monte Carlo table: one row per record, with the per-record metrics of
+Input is the chapter's Monte Carlo table: one row per record (the rows of the study
+:data:`~railpaper.experiments.quasi_gaussian_rbpf.experiment.MONTE_CARLO`, column ``seed`` =
+record index), with the per-record metrics of
 :func:`railpaper.experiments.quasi_gaussian_rbpf.experiment.record_metrics` (settling steps, final errors and
 errors at the chapter's ``short_horizon`` step, final distances from the exact posterior mean in
 posterior standard deviations ``final_z``, final spread ratios).  Every statistic is a median with its distribution-free 95 % interval or a rate
@@ -30,6 +32,8 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     NO_THRESHOLD,
     PARAMS,
     QGRBPF_READINGS,
+    Settings,
+    true_values,
 )
 from railpaper.stats import median_interval, prediction_interval, proportion_interval
 
@@ -178,3 +182,11 @@ def evidence_metrics(table: pd.DataFrame, truth: dict[str, float]) -> dict:
             large = int(np.sum(worst_abs_z(table, variant) > Z_SATISFACTORY))
             m.update(proportion_interval(large, n).metrics(f"mc_large_error_rate_{variant}"))
     return m
+
+
+def monte_carlo_metrics(table: pd.DataFrame, settings: Settings) -> dict:
+    """The reduce of the Monte Carlo study: :func:`descriptive_metrics` and
+    :func:`evidence_metrics` of the table of records (one row each, in record order: the means
+    are summed in that order)."""
+    return dict(descriptive_metrics(table, settings.n_steps),
+                **evidence_metrics(table, true_values(settings)))

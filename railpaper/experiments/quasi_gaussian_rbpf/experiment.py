@@ -14,12 +14,13 @@ Convergence is judged against the exact posterior: a filter "converges at step k
 step k on its estimate stays within two posterior standard deviations of the posterior mean
 (−1: outside at the last step).  For comparison with the paper we also report the first step at
 which the estimate gets within ``tolerance_to_truth`` of the true value.  The same is repeated
-for ``n_monte_carlo`` records (replicate ``record`` is the main record, the others follow it); the
-records other than the main one are run by a caller-supplied function (the notebook runs them as a
-sweep on worker processes, each sample being this module's ``run`` for one record) or in this
-process.  The statistics the claim rules read are computed from the records by
-:mod:`~railpaper.experiments.quasi_gaussian_rbpf.evidence`; the computing times (curves over N and
-paired repeats at the paper's N) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf.computing_time`.
+for ``n_monte_carlo`` records (record ``record`` is the main record, computed here in full; the
+others, ``record + 1`` on, are the study :data:`MONTE_CARLO`: one row per record, mapped by the
+caller's record map, in this process by default); the exact posterior's readings study is the
+study :data:`READINGS`.  The statistics the claim rules read are computed from the table of rows
+(the reduce) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf.evidence`; the computing times
+(curves over N and paired repeats at the paper's N) by
+:mod:`~railpaper.experiments.quasi_gaussian_rbpf.computing_time`.
 ``eq10_reading`` only selects which Q-GRBPF the illustrations show in full: the evidence of both
 readings is always computed.  :func:`run` returns a
 :class:`~railpaper.experiments.quasi_gaussian_rbpf.result.QuasiGaussianRBPFResult` (named fields).
@@ -28,6 +29,7 @@ readings is always computed.  :func:`run` returns a
 from __future__ import annotations
 
 import time
+from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -39,14 +41,14 @@ from railpaper.experiments.base import (
     ParameterError,
     check_banks,
     default_progress,
-    no_progress,
 )
 from railpaper.experiments.quasi_gaussian_rbpf.computing_time import operation_metrics, timing
-from railpaper.experiments.quasi_gaussian_rbpf.evidence import (
-    descriptive_metrics,
-    evidence_metrics,
+from railpaper.experiments.quasi_gaussian_rbpf.evidence import monte_carlo_metrics
+from railpaper.experiments.quasi_gaussian_rbpf.readings import (
+    load_readings,
+    readings_rows,
+    study_from_rows,
 )
-from railpaper.experiments.quasi_gaussian_rbpf.readings import run_readings
 from railpaper.experiments.quasi_gaussian_rbpf.result import (
     ComputingTime,
     OneRecord,
@@ -59,8 +61,8 @@ from railpaper.experiments.quasi_gaussian_rbpf.spec import (
     QGRBPF_READINGS,
     SPEC,
     Settings,
-    true_values,
 )
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.models.linear_toys import paper004_system, simulate_paper004
 from railpaper.settling import first_step, settling_step
 from railpaper.threads import one_thread
@@ -196,6 +198,30 @@ def record_metrics(settings: Settings, rep: OneRecord) -> dict:
     return m
 
 
+def record_row(settings: Settings, rep: OneRecord) -> dict:
+    """Record ``rep``'s row of the Monte Carlo table: ``seed`` (= the record index) and
+    :func:`record_metrics`."""
+    return dict(seed=rep.index, **record_metrics(settings, rep))
+
+
+def monte_carlo_rows(settings: Settings, seeds: Sequence[int]) -> pd.DataFrame:
+    """The Monte Carlo rows (:func:`record_row`) of records ``seeds``, one after another on one
+    thread: the chapter's per-record work (:data:`MONTE_CARLO`)."""
+    with one_thread():
+        return pd.DataFrame([record_row(settings, replicate(settings, int(index)))
+                             for index in seeds])
+
+
+#: The Monte Carlo records: one row per record (column ``seed`` = record index, the settings'
+#: ``seed`` staying in the settings), a record at a time as the chapter always ran them.
+MONTE_CARLO = RecordStudy(SPEC.name, "monte_carlo", monte_carlo_rows, chunk_records=1)
+
+#: The readings study's records (:func:`readings_rows` of
+#: :mod:`~railpaper.experiments.quasi_gaussian_rbpf.readings`): one wide row per record (every
+#: reading, horizon and parameter), column ``seed`` = record.
+READINGS = RecordStudy(SPEC.name, "readings", readings_rows, chunk_records=1)
+
+
 def _timeseries(rep: OneRecord) -> pd.DataFrame:
     exact, runs = rep.exact, rep.runs
     cols = {"step": rep.steps, "y1": rep.measurements[:, 0], "y2": rep.measurements[:, 1]}
@@ -227,17 +253,8 @@ def _timing(settings: Settings, y: np.ndarray, progress):
     return timing(settings, fresh_filter, FILTERS, y, progress)
 
 
-def records_in_process(settings: Settings, records: list[int],
-                       progress=no_progress) -> pd.DataFrame:
-    """Per-record metrics (column ``replicate`` = record index) of ``records``, one by one."""
-    rows = []
-    for i, index in enumerate(records):
-        progress(0.9 * (i + 1) / (len(records) + 1), f"Monte Carlo record {i + 1}/{len(records)}")
-        rows.append(dict(replicate=index, **record_metrics(settings, replicate(settings, index))))
-    return pd.DataFrame(rows)
-
-
-def run(settings: Settings, *, progress=None, monte_carlo=None) -> QuasiGaussianRBPFResult:
+def run(settings: Settings, *, progress=None,
+        record_map: RecordMap = map_in_process) -> QuasiGaussianRBPFResult:
     """Run the chapter: main record, Monte Carlo over records, computing times.
 
     Parameters
@@ -247,11 +264,11 @@ def run(settings: Settings, *, progress=None, monte_carlo=None) -> QuasiGaussian
         :func:`validate` first.
     progress : callable, optional
         ``progress(fraction, message)``.
-    monte_carlo : callable, optional
-        ``monte_carlo(settings, records, progress)`` → DataFrame with a ``replicate`` column (the
-        record index) and the per-record metrics of ``records`` (all but the main record), e.g. a
-        sweep of this function with ``n_monte_carlo = 1``, ``timing = False`` and ``record`` as
-        the grid.  Default: :func:`records_in_process`.
+    record_map : callable, optional
+        ``record_map(study, settings, seeds, progress)`` → the rows of ``seeds``
+        (:data:`railpaper.experiments.records.RecordMap`): where the Monte Carlo records other
+        than the main one (:data:`MONTE_CARLO`) and the readings study's records
+        (:data:`READINGS`) are computed.  Default: in this process.
 
     Returns
     -------
@@ -262,34 +279,32 @@ def run(settings: Settings, *, progress=None, monte_carlo=None) -> QuasiGaussian
 
     Notes
     -----
-    Runs on one numba and one OpenBLAS thread (:func:`railpaper.threads.one_thread`); the Monte
-    Carlo records run on sweep workers, one thread each, anyway.
+    Runs on one numba and one OpenBLAS thread (:func:`railpaper.threads.one_thread`), and so do
+    the rows functions of the studies wherever the record map runs them.
     """
     progress = progress or default_progress()
     validate(settings)
     with one_thread():
-        return _run(settings, progress, monte_carlo)
+        return _run(settings, progress, record_map)
 
 
-def _run(settings: Settings, progress, monte_carlo) -> QuasiGaussianRBPFResult:
+def _run(settings: Settings, progress, record_map: RecordMap) -> QuasiGaussianRBPFResult:
     """:func:`run` on validated settings, on one numba thread."""
     start = time.perf_counter()
     main = replicate(settings, settings.record)
-    first = dict(replicate=settings.record, **record_metrics(settings, main))
+    first = record_row(settings, main)
+    mc_table = normalised(pd.DataFrame([first]))
     records = list(range(settings.record + 1, settings.record + settings.n_monte_carlo))
-    mc_table = pd.DataFrame([first])
     if records:
-        others = (monte_carlo or records_in_process)(settings, records, progress)
-        missing = sorted(set(first) - set(others.columns))
-        if missing or sorted(others["replicate"]) != records:
-            raise ValueError(f"Monte Carlo records incomplete: expected records {records[0]}-"
-                             f"{records[-1]}{', columns ' + ', '.join(missing[:3]) if missing else ''}")
-        others = others.sort_values("replicate", kind="stable")[list(first)]
+        others = record_map(MONTE_CARLO, settings, records,
+                            lambda fraction, message: progress(0.9 * fraction, message))
+        if list(others.columns) != list(mc_table.columns):
+            raise ValueError(f"Monte Carlo rows of records {records[0]}-{records[-1]} have other "
+                             f"columns than the main record's")
         mc_table = pd.concat([mc_table, others], ignore_index=True)
     mc_seconds = time.perf_counter() - start
-    metrics = {k: v for k, v in first.items() if k != "replicate"}
-    metrics.update(descriptive_metrics(mc_table, settings.n_steps))
-    metrics.update(evidence_metrics(mc_table, true_values(settings)))
+    metrics = {k: v for k, v in first.items() if k != "seed"}
+    metrics.update(monte_carlo_metrics(mc_table, settings))
     metrics["grid_min_std_over_spacing"] = main.exact.min_std_over_spacing
     metrics["grid_edge_mass"] = main.exact.edge_mass
     model = paper004_system(settings.q_var, settings.r_var)(np.zeros((1, 2)))
@@ -301,12 +316,9 @@ def _run(settings: Settings, progress, monte_carlo) -> QuasiGaussianRBPFResult:
     readings = None
     if settings.readings_records > 0:
         start = time.perf_counter()
-        readings = run_readings(truth=(settings.a_true, settings.b_true),
-                                lower=(settings.a_min, settings.b_min),
-                                upper=(settings.a_max, settings.b_max),
-                                n_records=settings.readings_records,
-                                grid_size=settings.grid_size, tolerance=settings.tolerance_to_truth,
-                                seed=settings.seed, progress=lambda m: progress(0.97, m))
+        rows = record_map(READINGS, settings, range(settings.readings_records),
+                          lambda fraction, message: progress(0.98 + 0.02 * fraction, message))
+        readings = study_from_rows(rows, *load_readings())
         metrics.update(readings.metrics())
         timings["readings_seconds"] = time.perf_counter() - start
     progress(1.0, "done")

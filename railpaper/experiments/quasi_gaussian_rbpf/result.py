@@ -84,8 +84,8 @@ class QuasiGaussianRBPFResult(ChapterResult):
     main : OneRecord or None
         The main record (index ``record``), every filter and the exact posterior on it.
     monte_carlo : DataFrame
-        One row per Monte Carlo record (column ``replicate`` = record index, the main record
-        first) with the per-record metrics of
+        One row per Monte Carlo record (column ``seed`` = record index, the main record first,
+        the others in record order) with the per-record metrics of
         :func:`~railpaper.experiments.quasi_gaussian_rbpf.experiment.record_metrics`: settling and
         convergence steps (step, -1 never), final errors and errors at ``short_horizon`` (1),
         final distances from the exact posterior mean in posterior std (``final_z_*``) and

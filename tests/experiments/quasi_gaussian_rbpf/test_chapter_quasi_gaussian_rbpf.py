@@ -109,7 +109,7 @@ def test_typed_result_holds_the_record_and_its_exact_posterior():
         for name in ("rbpf", "qgrbpf"):
             assert result.metrics[f"final_error_{par}_{name}"] == pytest.approx(
                 main.runs[name].theta_mean[-1, j] - (settings.a_true, settings.b_true)[j], abs=1e-15)
-    assert list(result.monte_carlo.replicate) == [0, 1] and result.computing_time is None
+    assert list(result.monte_carlo.seed) == [0, 1] and result.computing_time is None
     assert result.data == {}
 
 
