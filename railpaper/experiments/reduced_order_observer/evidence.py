@@ -4,8 +4,11 @@ Two kinds, both turned into metrics that ``data/reduced-order-observer/claims.to
 
 * **Monte Carlo** (:func:`monte_carlo`): the chapter's simulation for ``mc_seeds`` seeds
   (``seed``, ``seed + 1``, …; each seed a new track profile and new sensor noise) at every speed
-  of the chapter, under BOTH readings of the paper's P0 (:data:`READINGS`).  All samples run as
-  one batch (time loop over arrays of samples): 200 seeds × 9 speeds × 2 readings take ≈ 30 s.
+  of the chapter, under BOTH readings of the paper's P0 (:data:`READINGS`).  It is a map over
+  records and a reduce: :func:`monte_carlo_rows` gives one wide row per seed (study
+  :data:`MONTE_CARLO`; a chunk of seeds runs as one batch, a time loop over arrays of
+  seeds × speeds, and a row's numbers do not depend on the chunk), :func:`samples_table` turns
+  the rows into the long table and :func:`evidence_metrics` into metrics.
   A sample of seed ``s`` at speed ``v`` uses the same profile and noise draws as the chapter's
   single run with ``seed = s``, so seed ``seed`` reproduces the single-run metrics.
   Per-seed values are summarised with :mod:`railpaper.stats`: medians with order-statistic
@@ -24,7 +27,8 @@ speeds of a seed differ in the signal only (common random numbers).
 Linearised contact (the paper's Aizerman step, Eq. 3 for Eq. 2): on the first :data:`HERTZ_SEEDS`
 seeds at the paper's speeds the wheelset is also simulated with the nonlinear Hertz contact, under
 both readings of P0, and the linear law K_r (z_w − q) is compared with the Hertz force on that
-same trajectory: column ``force_relative_rms_error_hertz`` (NaN elsewhere), no observer involved.
+same trajectory (study :data:`HERTZ`, :func:`hertz_rows`): column
+``force_relative_rms_error_hertz`` of the long table (NaN elsewhere), no observer involved.
 """
 
 from __future__ import annotations
@@ -36,11 +40,13 @@ import pandas as pd
 
 from railpaper import stats, track
 from railpaper.estimators import reduced_order_observer as roo
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process
 from railpaper.experiments.reduced_order_observer.record import (
     _observer_batch,
     _plant_batch,
     all_speeds,
     noise_draws,
+    padded,
     profile,
 )
 from railpaper.experiments.reduced_order_observer.spec import READINGS, Settings
@@ -60,6 +66,10 @@ SAMPLE_COLUMNS = ("convergence_time_s", "predicted_convergence_time_s", "displac
                   "displacement_relative_rms_error", "force_rms_N", "force_rms_error_N",
                   "force_relative_rms_error", "force_rms_error_N_fixed_noise", "z_w_rms_m",
                   "force_relative_rms_error_hertz", "force_relative_rms_error_hertz_observer")
+
+#: Per-sample quantities of the wide rows of :data:`MONTE_CARLO` and of :data:`HERTZ`.
+MC_QUANTITIES = SAMPLE_COLUMNS[:9]
+HERTZ_QUANTITIES = SAMPLE_COLUMNS[9:]
 
 
 def _rms(x, axis=0):
@@ -135,28 +145,11 @@ def _hertz_samples(reading, settings: Settings, t_s, q, columns) -> dict:
     return out
 
 
-def monte_carlo(settings: Settings, progress=None) -> pd.DataFrame:
-    """The Monte Carlo table: one row per (seed, speed, reading), columns :data:`SAMPLE_COLUMNS`.
-
-    Parameters
-    ----------
-    settings : Settings
-        The chapter's settings (``seed``, ``mc_seeds``, speeds, noise, observer, …).
-    progress : callable, optional
-        ``progress(fraction, message)``.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns ``seed, speed_kmh, reading`` and :data:`SAMPLE_COLUMNS` (SI units; a convergence
-        time of -1 means the error never stayed below the threshold; the Hertz column is NaN
-        outside the first :data:`HERTZ_SEEDS` seeds and the paper's speeds).
-    """
-    progress = progress or (lambda fraction, message: None)
-    speeds = all_speeds(settings)
-    seeds = list(range(settings.seed, settings.seed + settings.mc_seeds))
-    reference_speed = settings.speeds_kmh[0]
-    columns_q, columns_ny, columns_nq, keys = [], [], [], []
+def _seed_inputs(settings: Settings, seeds, speeds):
+    """Times t_s (K,), irregularity q (K, N) and the standard-normal sensor draws (K, N, 2) and
+    (K, N) of ``seeds`` × ``speeds`` (columns seed-major: the seed's speeds side by side;
+    :func:`record.padded` to at least two columns)."""
+    columns_q, columns_ny, columns_nq = [], [], []
     for seed in seeds:
         distance_m, profile_m = profile(settings, seed)
         for speed in speeds:
@@ -166,27 +159,147 @@ def monte_carlo(settings: Settings, progress=None) -> pd.DataFrame:
             columns_q.append(q[:, 0])
             columns_ny.append(ny)
             columns_nq.append(nq)
-            keys.append((seed, speed))
-    q = np.column_stack(columns_q)
-    noise_y, noise_q = np.stack(columns_ny, axis=1), np.column_stack(columns_nq)
-    del columns_q, columns_ny, columns_nq
-    index = {key: i for i, key in enumerate(keys)}
-    reference = np.array([index[(seed, reference_speed)] for seed, _ in keys])
-    hertz_columns = np.array([i for i, (seed, speed) in enumerate(keys)
-                              if seed < settings.seed + HERTZ_SEEDS
-                              and speed in settings.speeds_kmh], dtype=int)
-    frames = []
-    for i, reading in enumerate(READINGS):
-        progress(i / len(READINGS), f"Monte Carlo, P0 per {reading}")
+    return (t_s, padded(np.column_stack(columns_q)), padded(np.stack(columns_ny, axis=1)),
+            padded(np.column_stack(columns_nq)))
+
+
+def sample_column(quantity: str, reading: str, speed_kmh: float) -> str:
+    """Column of a record's row holding ``quantity`` (units in its name) at one reading of P0
+    and one speed: ``convergence_time_s_wheel_60kmh``."""
+    return f"{quantity}_{reading}_{speed_kmh:g}kmh"
+
+
+def hertz_speeds(settings: Settings) -> list[float]:
+    """Speeds of the Hertz records: the paper's (``speeds_kmh``), in the run's order."""
+    return [speed for speed in all_speeds(settings) if speed in settings.speeds_kmh]
+
+
+def monte_carlo_rows(settings: Settings, seeds: tuple[int, ...]) -> pd.DataFrame:
+    """One row per seed of ``seeds`` (in order): column ``seed`` and, for every reading of P0
+    and every speed of the run (:func:`all_speeds`), the quantities of :data:`MC_QUANTITIES`
+    (:func:`sample_column`; SI units, a convergence time of -1 s: never settled).
+
+    The seeds' samples run as one batch (time loop over arrays of seeds × speeds, at least two
+    columns: :func:`record.padded`); a sample's numbers do not depend on the other columns of
+    its batch, so a seed's row is the same bits whatever seeds share its chunk."""
+    seeds = [int(s) for s in seeds]
+    speeds = all_speeds(settings)
+    t_s, q, noise_y, noise_q = _seed_inputs(settings, seeds, speeds)
+    reference_speed = speeds.index(settings.speeds_kmh[0])
+    reference = np.array([i // len(speeds) * len(speeds) + reference_speed
+                          for i in range(q.shape[1])])              # a pad column: itself
+    row = {"seed": seeds}
+    for reading in READINGS:
         samples = _reading_samples(reading, settings, t_s, q, noise_y, noise_q, reference)
-        samples.update(_hertz_samples(reading, settings, t_s, q, hertz_columns))
+        for name in MC_QUANTITIES:
+            values = np.asarray(samples[name], dtype=float)[:len(seeds) * len(speeds)].reshape(
+                len(seeds), len(speeds))
+            for j, speed in enumerate(speeds):
+                row[sample_column(name, reading, speed)] = values[:, j]
+    return pd.DataFrame(row)
+
+
+def hertz_rows(settings: Settings, seeds: tuple[int, ...]) -> pd.DataFrame:
+    """One row per seed of ``seeds`` (in order): column ``seed`` and, for every reading of P0
+    and every speed of :func:`hertz_speeds`, the quantities of :data:`HERTZ_QUANTITIES`
+    (:func:`_hertz_samples`: the wheelset under the nonlinear Hertz contact)."""
+    seeds = [int(s) for s in seeds]
+    speeds = hertz_speeds(settings)
+    t_s, q, _, _ = _seed_inputs(settings, seeds, speeds)
+    columns = np.arange(q.shape[1])
+    row = {"seed": seeds}
+    for reading in READINGS:
+        samples = _hertz_samples(reading, settings, t_s, q, columns)
+        for name in HERTZ_QUANTITIES:
+            values = samples[name][:len(seeds) * len(speeds)].reshape(len(seeds), len(speeds))
+            for j, speed in enumerate(speeds):
+                row[sample_column(name, reading, speed)] = values[:, j]
+    return pd.DataFrame(row)
+
+
+#: The Monte Carlo's records: every seed at every speed under both readings of P0 (one batch of
+#: seeds × speeds per chunk; 20 seeds are 180 columns at the default speeds).
+MONTE_CARLO = RecordStudy("reduced-order-observer", "monte_carlo", monte_carlo_rows,
+                          chunk_records=20)
+
+#: The Hertz records of the linearisation claim: the first :data:`HERTZ_SEEDS` seeds at the
+#: paper's speeds (compiled RK4, one column at a time; chunks of 10 seeds).
+HERTZ = RecordStudy("reduced-order-observer", "hertz", hertz_rows, chunk_records=10)
+
+
+def mc_seeds(settings: Settings) -> list[int]:
+    """The Monte Carlo's seeds: ``seed``, ``seed + 1``, … (``mc_seeds`` of them)."""
+    return list(range(settings.seed, settings.seed + settings.mc_seeds))
+
+
+def hertz_seeds(settings: Settings) -> list[int]:
+    """The seeds of the Hertz records: the first :data:`HERTZ_SEEDS` of :func:`mc_seeds`."""
+    return mc_seeds(settings)[:HERTZ_SEEDS]
+
+
+def monte_carlo_records(settings: Settings, progress=None,
+                        record_map: RecordMap = map_in_process) -> dict[str, pd.DataFrame]:
+    """The rows of :data:`MONTE_CARLO` (seeds :func:`mc_seeds`) and :data:`HERTZ` (seeds
+    :func:`hertz_seeds`) through ``record_map``, by study name."""
+    progress = progress or (lambda fraction, message: None)
+    rows = {MONTE_CARLO.name: record_map(MONTE_CARLO, settings, mc_seeds(settings),
+                                         lambda f, m: progress(0.8 * f, m))}
+    rows[HERTZ.name] = record_map(HERTZ, settings, hertz_seeds(settings),
+                                  lambda f, m: progress(0.8 + 0.2 * f, m))
+    progress(1.0, "Monte Carlo done")
+    return rows
+
+
+def samples_table(rows: pd.DataFrame, hertz: pd.DataFrame, settings: Settings) -> pd.DataFrame:
+    """The Monte Carlo table (one row per reading, seed and speed, columns ``seed, speed_kmh,
+    reading`` and :data:`SAMPLE_COLUMNS`) from the records' rows: :data:`MONTE_CARLO`'s
+    ``rows`` and :data:`HERTZ`'s ``hertz`` (the Hertz columns NaN outside its seeds and
+    speeds)."""
+    speeds = all_speeds(settings)
+    seeds = [int(s) for s in rows["seed"]]
+    keys = [(seed, speed) for seed in seeds for speed in speeds]
+    at_hertz = hertz.set_index("seed")
+    frames = []
+    for reading in READINGS:
         frame = pd.DataFrame(keys, columns=["seed", "speed_kmh"])
         frame["reading"] = reading
         for name in SAMPLE_COLUMNS:
-            frame[name] = samples[name]
+            if name in MC_QUANTITIES:
+                frame[name] = rows[[sample_column(name, reading, v) for v in speeds]
+                                   ].to_numpy().reshape(-1)
+                continue
+            values = np.full(len(keys), np.nan)
+            for i, (seed, speed) in enumerate(keys):
+                if seed in at_hertz.index and speed in settings.speeds_kmh:
+                    values[i] = at_hertz.at[seed, sample_column(name, reading, speed)]
+            frame[name] = values
         frames.append(frame)
-    progress(1.0, "Monte Carlo done")
     return pd.concat(frames, ignore_index=True)
+
+
+def monte_carlo(settings: Settings, progress=None,
+                record_map: RecordMap = map_in_process) -> pd.DataFrame:
+    """The Monte Carlo table: one row per (seed, speed, reading), columns :data:`SAMPLE_COLUMNS`
+    (:func:`samples_table` of :func:`monte_carlo_records`).
+
+    Parameters
+    ----------
+    settings : Settings
+        The chapter's settings (``seed``, ``mc_seeds``, speeds, noise, observer, …).
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    record_map : RecordMap
+        Where the records are computed (default: here).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``seed, speed_kmh, reading`` and :data:`SAMPLE_COLUMNS` (SI units; a convergence
+        time of -1 means the error never stayed below the threshold; the Hertz column is NaN
+        outside the first :data:`HERTZ_SEEDS` seeds and the paper's speeds).
+    """
+    rows = monte_carlo_records(settings, progress, record_map)
+    return samples_table(rows[MONTE_CARLO.name], rows[HERTZ.name], settings)
 
 
 def _per_seed(table: pd.DataFrame, column: str, speeds) -> np.ndarray:

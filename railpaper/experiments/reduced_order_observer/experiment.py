@@ -29,6 +29,7 @@ import pandas as pd
 from railpaper import track
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments.base import ParameterError, default_progress
+from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.experiments.reduced_order_observer import evidence, kalman, record
 from railpaper.experiments.reduced_order_observer.record import (  # noqa: F401 (chapter API)
     ObserverRun,
@@ -137,14 +138,18 @@ def _side_tables(vehicle, observers, settings: Settings, distance_m, profile_m, 
     return pd.DataFrame(noise_rows), pd.DataFrame(plant_rows)
 
 
-def run(settings: Settings, *, progress=None) -> ReducedOrderObserverResult:
+def run(settings: Settings, *, progress=None,
+        record_map: RecordMap = map_in_process) -> ReducedOrderObserverResult:
     """Run the chapter with its resolved ``settings`` (of :data:`SPEC`; quick sizes included).
 
     Single runs of seed ``seed`` (reading ``p0_basis``) give the illustrations and their metrics;
     with ``side_tables`` the run adds the side tables and the claims' evidence: the Monte Carlo
     metrics (``mc_*``, every reading), the deterministic structure metrics (``rank_*`` and
     ``pole_placement_*``) and the estimator comparison (:func:`kalman.compare`, reading
-    ``p0_basis``).
+    ``p0_basis``).  The per-seed records of the studies (:data:`evidence.MONTE_CARLO`,
+    :data:`evidence.HERTZ`, :data:`kalman.ESTIMATOR_RECORDS`,
+    :data:`kalman.TRACK_NOISE_RECORDS`) are computed by ``record_map`` (default: here) and
+    written as the extra tables ``records_<study>``; the metrics are their reduce.
     """
     validate(settings)
     progress = progress or default_progress()
@@ -176,17 +181,22 @@ def run(settings: Settings, *, progress=None) -> ReducedOrderObserverResult:
         columns[f"wheelset_displacement_est_m_{lab}"] = main.z_w_est_m
         columns[f"wheel_rail_force_true_N_{lab}"] = r.record.force_true_N
         columns[f"wheel_rail_force_est_N_{lab}"] = main.force_est_N
-    mc, estimators = pd.DataFrame(), None
+    mc, estimators, records = pd.DataFrame(), None, {}
     timings = {"single_runs_s": time.perf_counter() - started}
     if settings.side_tables:
         mc_started = time.perf_counter()
-        mc = evidence.monte_carlo(settings, lambda f, m: progress(0.6 + 0.2 * f, m))
+        records.update(evidence.monte_carlo_records(
+            settings, lambda f, m: progress(0.6 + 0.2 * f, m), record_map))
+        mc = evidence.samples_table(records[evidence.MONTE_CARLO.name],
+                                    records[evidence.HERTZ.name], settings)
         metrics.update(evidence.legacy_band_metrics(mc, settings))
         metrics.update(evidence.evidence_metrics(mc, settings))
         metrics.update(evidence.structure_metrics(settings))
         timings["monte_carlo_s"] = time.perf_counter() - mc_started
         kalman_started = time.perf_counter()
-        estimators = kalman.compare(settings, lambda f, m: progress(0.8 + 0.2 * f, m))
+        records.update(kalman.comparison_records(
+            settings, lambda f, m: progress(0.8 + 0.19 * f, m), record_map))
+        estimators = kalman.comparison(records, settings)
         metrics.update(kalman.comparison_metrics(estimators, settings))
         timings["kalman_s"] = time.perf_counter() - kalman_started
     progress(1.0, "done")
@@ -206,7 +216,8 @@ def run(settings: Settings, *, progress=None) -> ReducedOrderObserverResult:
     return ReducedOrderObserverResult(
         metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
         extra_tables={"speed_sweep": sweep, "monte_carlo_samples": mc,
-                      "estimator_samples": estimators.samples}
+                      "estimator_samples": estimators.samples,
+                      **{f"records_{name}": rows for name, rows in records.items()}}
         if settings.side_tables else {"speed_sweep": sweep},
         vehicle=vehicle, A=A, B=B, observer=observer,
         error_poles_per_s=np.linalg.eigvals(observer.F), runs=runs, speed_sweep=sweep,

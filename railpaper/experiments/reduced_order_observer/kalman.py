@@ -10,7 +10,10 @@ irregularity ``q`` — this module runs, besides that observer:
 * its **Rauch–Tung–Striebel smoother** (offline: it uses the whole record).
 
 Both come from :mod:`railpaper.estimators.kalman_smoother` (time-varying gains computed once per
-speed and noise level, then applied to every seed).  The force is ``K_r (ẑ_w − q̂)``.
+speed, noise level and chunk of seeds, then applied to every seed of the chunk).  The force is
+``K_r (ẑ_w − q̂)``.  The comparison is a map over records and a reduce: studies
+:data:`ESTIMATOR_RECORDS` and :data:`TRACK_NOISE_RECORDS` give one wide row per seed,
+:func:`samples_table` the long table and :func:`comparison_metrics` the metrics.
 
 What the filter is told: the sensor noise σ of each body channel as ``noise_fraction`` × the
 channel's stationary standard deviation under the model at that speed (the sensor's stated
@@ -43,6 +46,7 @@ from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
 from railpaper.estimators import reduced_order_observer as roo
 from railpaper.experiments import track_shaping
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process
 from railpaper.experiments.reduced_order_observer import record, spec
 from railpaper.experiments.reduced_order_observer.result import (
     ForceEstimates,
@@ -131,7 +135,8 @@ def _rms(x, axis=0):
 
 @dataclass(frozen=True)
 class _Records:
-    """Truth and standard-normal sensor draws of S records at one speed (columns = seeds)."""
+    """Truth and standard-normal sensor draws of S records at one speed (columns = seeds, then
+    the pad columns of :func:`record.padded`)."""
 
     seeds: list
     t_s: np.ndarray
@@ -141,13 +146,10 @@ class _Records:
     draws_y: np.ndarray    # (K, S, 2)
     draws_q: np.ndarray    # (K, S)
 
-    def first(self, n: int) -> "_Records":
-        return _Records(self.seeds[:n], self.t_s, self.q[:, :n], self.y[:, :n], self.force[:, :n],
-                        self.draws_y[:, :n], self.draws_q[:, :n])
-
 
 def _simulate(vehicle, settings: Settings, speed, profiles) -> _Records:
-    """The plant on every seed's profile at one speed (the chapter's records and draws)."""
+    """The plant on every seed's profile at one speed (the chapter's records and draws), as one
+    batch of at least :data:`record.MIN_BATCH_COLUMNS` columns."""
     columns_q, draws_y, draws_q = [], [], []
     for seed, (distance_m, profile_m) in profiles.items():
         t_s, q = track.wheelset_inputs(distance_m, profile_m, speed / 3.6, [0.0], settings.dt_s,
@@ -156,21 +158,32 @@ def _simulate(vehicle, settings: Settings, speed, profiles) -> _Records:
         columns_q.append(q[:, 0])
         draws_y.append(ny)
         draws_q.append(nq)
-    q = np.column_stack(columns_q)                                      # (K, S)
+    q = record.padded(np.column_stack(columns_q))                     # (K, S)
     y, z_w = record._plant_batch(vehicle, settings.plant, settings.dt_s, q)
     return _Records(list(profiles), t_s, q, y,
                     sw.dynamic_contact_force_N(vehicle, z_w, q, settings.plant),
-                    np.stack(draws_y, axis=1), np.column_stack(draws_q))
+                    record.padded(np.stack(draws_y, axis=1)),
+                    record.padded(np.column_stack(draws_q)))
 
 
-def _speed_samples(vehicle, model, observer, settings: Settings, speed, records: _Records,
-                   configs):
-    """Per-sample rows at one speed (every record, every ``(sensor noise fraction, track noise
-    fraction)`` of ``configs``) and the first record's forces at the first config."""
-    seeds, t_s, q, y, force = records.seeds, records.t_s, records.q, records.y, records.force
+@dataclass(frozen=True)
+class _SpeedErrors:
+    """The estimators on S records at one speed under L ``(sensor, track)`` noise configs."""
+
+    force_rms_N: np.ndarray        # (S,) true force over the error window
+    q_rms_m: np.ndarray            # (S,) the record's q
+    error_rms_N: dict              # estimator -> (L, S) RMS force error
+    example: ForceEstimates        # the first record at the first config
+
+
+def _speed_errors(vehicle, model, observer, settings: Settings, records: _Records,
+                  configs) -> _SpeedErrors:
+    """Every estimator on every record of ``records`` at every ``(sensor noise fraction, track
+    noise fraction)`` of ``configs``."""
+    t_s, q, y, force = records.t_s, records.q, records.y, records.force
     window = t_s >= settings.error_window_start_s
     force_rms, q_rms = _rms(force[window]), _rms(q)                    # (S,)
-    L, S = len(configs), len(seeds)
+    L, S = len(configs), q.shape[1]
     sensor, track_noise = (np.array([c[i] for c in configs])[:, None] for i in (0, 1))
     meas = np.empty((len(q), L, S, 3))                                  # [ż_c, z_c, q] measured
     meas[..., :2] = y[:, None] + records.draws_y[:, None] * sensor[..., None] * _rms(y)
@@ -189,50 +202,175 @@ def _speed_samples(vehicle, model, observer, settings: Settings, speed, records:
     x_smoothed = ks.smoother_means(gains, model.F, model.H, innovations, x_filtered)
     del x_filtered, innovations, gains
     estimates["smoother"] = k_r * (x_smoothed[..., 3] - x_smoothed[..., 4])
-    rows = []
-    for name, f_est in estimates.items():
-        error_rms = _rms((f_est - force[:, None])[window])               # (L, S)
-        for i, (level, track_level) in enumerate(configs):
-            for j, seed in enumerate(seeds):
-                rows.append((seed, speed, level, track_level, name, force_rms[j],
-                             error_rms[i, j], error_rms[i, j] / force_rms[j], q_rms[j]))
-    example = ForceEstimates(t_s=t_s, force_true_N=force[:, 0],
-                             **{f"{k}_N": v[:, 0, 0] for k, v in estimates.items()})
-    return rows, example
+    return _SpeedErrors(
+        force_rms_N=force_rms, q_rms_m=q_rms,
+        error_rms_N={name: _rms((f_est - force[:, None])[window])
+                     for name, f_est in estimates.items()},
+        example=ForceEstimates(t_s=t_s, force_true_N=force[:, 0],
+                               **{f"{k}_N": v[:, 0, 0] for k, v in estimates.items()}))
 
 
-def compare(settings: Settings, progress=None) -> KalmanComparison:
-    """The paper's observer, the Kalman filter and the smoother at the run's speeds
-    (``speeds_kmh``), reading ``p0_basis``: on ``mc_seeds`` seeds × :func:`noise_levels` (track
-    noise ``track_noise_fraction``), and on the first :data:`TRACK_NOISE_SEEDS` seeds ×
-    :data:`TRACK_NOISE_FRACTIONS` at the run's sensor noise."""
-    progress = progress or (lambda fraction, message: None)
+def sensor_configs(settings: Settings) -> list[tuple[float, float]]:
+    """``(sensor, track)`` noise fractions of the sensor sweep: the run's first, then the other
+    levels of :func:`noise_levels`, at the run's ``track_noise_fraction``."""
+    run_noise, run_track = float(settings.noise_fraction), float(settings.track_noise_fraction)
+    return [(run_noise, run_track)] + [(f, run_track) for f in noise_levels(settings)
+                                       if f != run_noise]
+
+
+def track_configs(settings: Settings) -> list[tuple[float, float]]:
+    """``(sensor, track)`` noise fractions of the track-noise sweep: the run's sensor noise and
+    each of :data:`TRACK_NOISE_FRACTIONS`."""
+    return [(float(settings.noise_fraction), f) for f in TRACK_NOISE_FRACTIONS]
+
+
+#: The two sweeps: the noise configs of each and the level in the name of its columns.
+SWEEPS = {"sensor": (sensor_configs, 0), "track": (track_configs, 1)}
+
+
+def error_column(estimator: str, sweep: str, level: float, speed_kmh: float) -> str:
+    """Column of a record's row holding one estimator's RMS force error (N) at one noise level
+    of a sweep (``sensor`` or ``track``) and one speed, e.g.
+    ``force_rms_error_N_kalman_sensor_noise0.01_60kmh``."""
+    return f"force_rms_error_N_{estimator}_{sweep}_noise{level!r}_{speed_kmh:g}kmh"
+
+
+def _estimator(settings: Settings):
+    """The vehicle (reading ``p0_basis``), its (A, B) and the paper's discrete observer."""
     vehicle = sw.load_parameters(p0_basis=settings.p0_basis)
     A, B = sw.state_space(vehicle)
     hold = "zoh" if settings.observer_form == "paper" else "foh"
     observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, hold)
-    profiles = {seed: record.profile(settings, seed)
-                for seed in range(settings.seed, settings.seed + settings.mc_seeds)}
-    levels = noise_levels(settings)
-    run_noise, run_track = float(settings.noise_fraction), float(settings.track_noise_fraction)
-    sensor_configs = [(run_noise, run_track)] + [(f, run_track) for f in levels if f != run_noise]
-    track_configs = [(run_noise, f) for f in TRACK_NOISE_FRACTIONS]
-    rows, examples, shaping = [], {}, {}
-    for i, speed in enumerate(settings.speeds_kmh):
-        progress(i / len(settings.speeds_kmh), f"Kalman filter and smoother, {speed:g} km/h")
-        shaping[speed] = shaping_filter(settings.track_class, speed / 3.6)
-        model = kalman_model(A, B, shaping[speed], settings.dt_s)
-        records = _simulate(vehicle, settings, speed, profiles)
-        speed_rows, examples[speed] = _speed_samples(vehicle, model, observer, settings, speed,
-                                                     records, sensor_configs)
-        rows += [r + ("sensor",) for r in speed_rows]
-        speed_rows, _ = _speed_samples(vehicle, model, observer, settings, speed,
-                                       records.first(TRACK_NOISE_SEEDS), track_configs)
-        rows += [r + ("track",) for r in speed_rows]
-    samples = pd.DataFrame(rows, columns=["seed", "speed_kmh", "noise_fraction",
-                                          "track_noise_fraction", "estimator", "force_rms_N",
-                                          "force_rms_error_N", "ratio", "q_rms_m", "sweep"])
-    return KalmanComparison(samples=samples, examples=examples, shaping=shaping)
+    return vehicle, A, B, observer
+
+
+def _sweep_rows(settings: Settings, seeds: tuple[int, ...], sweep: str) -> pd.DataFrame:
+    """One row per seed of ``seeds``: per speed of ``speeds_kmh``, ``force_rms_N_<v>kmh``,
+    ``q_rms_m_<v>kmh`` and :func:`error_column` of every estimator and config of ``sweep``."""
+    seeds = [int(s) for s in seeds]
+    vehicle, A, B, observer = _estimator(settings)
+    profiles = {seed: record.profile(settings, seed) for seed in seeds}
+    configs, level = SWEEPS[sweep][0](settings), SWEEPS[sweep][1]
+    row, n = {"seed": seeds}, len(seeds)
+    for speed in settings.speeds_kmh:
+        model = kalman_model(A, B, shaping_filter(settings.track_class, speed / 3.6),
+                             settings.dt_s)
+        errors = _speed_errors(vehicle, model, observer, settings,
+                               _simulate(vehicle, settings, speed, profiles), configs)
+        row[f"force_rms_N_{speed:g}kmh"] = errors.force_rms_N[:n]
+        row[f"q_rms_m_{speed:g}kmh"] = errors.q_rms_m[:n]
+        for name, error_rms in errors.error_rms_N.items():
+            for i, config in enumerate(configs):
+                row[error_column(name, sweep, config[level], speed)] = error_rms[i, :n]
+    return pd.DataFrame(row)
+
+
+def estimator_rows(settings: Settings, seeds: tuple[int, ...]) -> pd.DataFrame:
+    """The sensor sweep's rows (:func:`_sweep_rows`): every estimator at every sensor noise level
+    of :func:`noise_levels` (the run's track noise), per speed of ``speeds_kmh``."""
+    return _sweep_rows(settings, seeds, "sensor")
+
+
+def track_noise_rows(settings: Settings, seeds: tuple[int, ...]) -> pd.DataFrame:
+    """The track-noise sweep's rows (:func:`_sweep_rows`): every estimator at every noise level
+    of :data:`TRACK_NOISE_FRACTIONS` on the q record (the run's sensor noise)."""
+    return _sweep_rows(settings, seeds, "track")
+
+
+#: The estimators on every Monte Carlo seed at every sensor noise level (chunks of 40 seeds, the
+#: quick run's one batch: a chunk's fixed cost — the filter's gains per speed, the time loops —
+#: is then under half of it, and its arrays under 1 GB at the default sizes).
+ESTIMATOR_RECORDS = RecordStudy("reduced-order-observer", "estimators", estimator_rows,
+                                chunk_records=40)
+
+#: The estimators on the first :data:`TRACK_NOISE_SEEDS` seeds at every track noise level.
+TRACK_NOISE_RECORDS = RecordStudy("reduced-order-observer", "estimators_track_noise",
+                                  track_noise_rows, chunk_records=TRACK_NOISE_SEEDS)
+
+
+def comparison_seeds(settings: Settings) -> dict[str, list[int]]:
+    """The seeds of each study: ``mc_seeds`` seeds from ``seed``; the first
+    :data:`TRACK_NOISE_SEEDS` of them for the track-noise sweep."""
+    seeds = list(range(settings.seed, settings.seed + settings.mc_seeds))
+    return {ESTIMATOR_RECORDS.name: seeds, TRACK_NOISE_RECORDS.name: seeds[:TRACK_NOISE_SEEDS]}
+
+
+def comparison_records(settings: Settings, progress=None,
+                       record_map: RecordMap = map_in_process) -> dict[str, pd.DataFrame]:
+    """The rows of :data:`ESTIMATOR_RECORDS` and :data:`TRACK_NOISE_RECORDS` through
+    ``record_map``, by study name."""
+    progress = progress or (lambda fraction, message: None)
+    seeds = comparison_seeds(settings)
+    return {
+        ESTIMATOR_RECORDS.name: record_map(ESTIMATOR_RECORDS, settings,
+                                           seeds[ESTIMATOR_RECORDS.name],
+                                           lambda f, m: progress(0.85 * f, m)),
+        TRACK_NOISE_RECORDS.name: record_map(TRACK_NOISE_RECORDS, settings,
+                                             seeds[TRACK_NOISE_RECORDS.name],
+                                             lambda f, m: progress(0.85 + 0.1 * f, m))}
+
+
+def samples_table(rows: dict[str, pd.DataFrame], settings: Settings) -> pd.DataFrame:
+    """The comparison's samples (:attr:`KalmanComparison.samples`, one row per seed, speed,
+    noise config, estimator and sweep) from the studies' rows (:func:`comparison_records`)."""
+    out = []
+    for speed in settings.speeds_kmh:
+        lab = f"{speed:g}kmh"
+        for sweep, study in (("sensor", ESTIMATOR_RECORDS), ("track", TRACK_NOISE_RECORDS)):
+            table = rows[study.name]
+            configs, level = SWEEPS[sweep][0](settings), SWEEPS[sweep][1]
+            seeds = [int(s) for s in table["seed"]]
+            force_rms = table[f"force_rms_N_{lab}"].to_numpy()
+            q_rms = table[f"q_rms_m_{lab}"].to_numpy()
+            for name in ESTIMATORS:
+                for sensor_level, track_level in configs:
+                    error = table[error_column(
+                        name, sweep, (sensor_level, track_level)[level], speed)].to_numpy()
+                    out += [(seed, speed, sensor_level, track_level, name, force_rms[j],
+                             error[j], error[j] / force_rms[j], q_rms[j], sweep)
+                            for j, seed in enumerate(seeds)]
+    return pd.DataFrame(out, columns=["seed", "speed_kmh", "noise_fraction",
+                                      "track_noise_fraction", "estimator", "force_rms_N",
+                                      "force_rms_error_N", "ratio", "q_rms_m", "sweep"])
+
+
+def examples(settings: Settings) -> dict:
+    """Per speed of ``speeds_kmh``, the forces of seed ``seed`` at the run's noise
+    (:class:`ForceEstimates`; the same numbers as that record's in the studies)."""
+    vehicle, A, B, observer = _estimator(settings)
+    profiles = {settings.seed: record.profile(settings, settings.seed)}
+    out = {}
+    for speed in settings.speeds_kmh:
+        model = kalman_model(A, B, shaping_filter(settings.track_class, speed / 3.6),
+                             settings.dt_s)
+        out[speed] = _speed_errors(vehicle, model, observer, settings,
+                                   _simulate(vehicle, settings, speed, profiles),
+                                   sensor_configs(settings)[:1]).example
+    return out
+
+
+def compare(settings: Settings, progress=None,
+            record_map: RecordMap = map_in_process) -> KalmanComparison:
+    """The paper's observer, the Kalman filter and the smoother at the run's speeds
+    (``speeds_kmh``), reading ``p0_basis``: on ``mc_seeds`` seeds × :func:`noise_levels` (track
+    noise ``track_noise_fraction``), and on the first :data:`TRACK_NOISE_SEEDS` seeds ×
+    :data:`TRACK_NOISE_FRACTIONS` at the run's sensor noise (the records through
+    ``record_map``; the example forces of seed ``seed`` computed here)."""
+    progress = progress or (lambda fraction, message: None)
+    return comparison(comparison_records(settings, progress, record_map), settings,
+                      lambda f, m: progress(0.95 + 0.05 * f, m))
+
+
+def comparison(rows: dict[str, pd.DataFrame], settings: Settings, progress=None
+               ) -> KalmanComparison:
+    """:class:`KalmanComparison` of the studies' ``rows`` (:func:`comparison_records`): their
+    :func:`samples_table`, the example forces (:func:`examples`) and the shaping filters."""
+    progress = progress or (lambda fraction, message: None)
+    progress(0.0, "Kalman filter and smoother, example record")
+    shaping = {speed: shaping_filter(settings.track_class, speed / 3.6)
+               for speed in settings.speeds_kmh}
+    return KalmanComparison(samples=samples_table(rows, settings), examples=examples(settings),
+                            shaping=shaping)
 
 
 def comparison_metrics(comparison: KalmanComparison, settings: Settings) -> dict:

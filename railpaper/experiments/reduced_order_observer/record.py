@@ -125,6 +125,22 @@ def noise_draws(seed: int, speed_kmh: float, n_samples: int, salt: tuple = ()):
     return rng.standard_normal((n_samples, 2)), rng.standard_normal(n_samples)
 
 
+#: Fewest columns of a batch: a batch of one column is padded with a copy of it, because numpy
+#: computes it differently (a mean over one contiguous column sums pairwise, a matrix times one
+#: column is a BLAS gemv, not a gemm) and its numbers would differ in the last bits from the
+#: same column's in a wider batch.
+MIN_BATCH_COLUMNS = 2
+
+
+def padded(columns: np.ndarray) -> np.ndarray:
+    """``columns`` (K, N, …) with copies of its last column appended up to
+    :data:`MIN_BATCH_COLUMNS` columns (the batches of one seed at one speed)."""
+    missing = MIN_BATCH_COLUMNS - columns.shape[1]
+    if missing <= 0:
+        return columns
+    return np.concatenate([columns] + [columns[:, -1:]] * missing, axis=1)
+
+
 def _plant_batch(vehicle, plant, dt_s, q):
     """Plant response to q (K, N) from rest on q[0]: y = [ż_c, z_c] (K, N, 2) and z_w (K, N).
 
