@@ -134,7 +134,8 @@ class EvidenceStore:
                                             "settings": record_key(settings)},
                                            indent=1, sort_keys=True) + "\n")
         path = folder / "rows.csv"
-        frame = rows.assign(commit=commit)
+        frame = rows.copy()                 # one block: no fragmented-frame warning
+        frame["commit"] = commit
         header = ",".join(frame.columns)
         if path.exists():
             text = path.read_text()

@@ -5,7 +5,7 @@ import pytest
 
 from railpaper import contact
 from railpaper.data import DataError
-from railpaper.experiments.partial_state_observer.evidence import suspension
+from railpaper.experiments.partial_state_observer.records import suspension
 from railpaper.models import vertical_10dof as v10
 
 

@@ -1,27 +1,14 @@
 """Monte Carlo evidence of chapter ``partial-state-observer``: the statistics its claim rules read.
 
 Each Monte Carlo run is one seed (track profile and sensor noise) at one speed under one reading
-of Table 1.  :func:`run_measures` turns one run's estimate into numbers; :func:`evidence_metrics`
-turns the table of runs into the ``mc_*`` metrics of ``metrics.json`` (medians, rates and paired
-trends over seeds with 95 % intervals, :mod:`railpaper.stats`).  Nothing here decides a verdict:
-``data/partial-state-observer/claims.toml`` does.
-
-Definitions (wheelsets 1-4; ``win``: t ≥ the error window start, 1 s)
-----------------------------------------------------------------------
-* ``convergence_time_s``: first time after which ``|ẑ_i − z_i| < threshold_i`` for every i to the
-  end of the run, with ``threshold_i`` = 5 % of the RMS of the true z_i over the run; the run's
-  duration if it never settles (censored: the statistics then stay finite and conservative);
-* ``convergence_time_fixed_s``: the same against a threshold that does not depend on the speed
-  (5 % of the RMS of the seed's whole track profile);
-* ``converged``: settled at a time ≤ the window start (the paper: 'after starting 1 second when
-  the observer become stable');
-* ``max_error_after_1s_m``: ``max_{i, win} |ẑ_i − z_i|``;
-* ``mean_relative_error``: ``mean_i mean_win |ẑ_i − z_i| / RMS_win(z_i)``;
-* ``biggest_mean_relative_error``: ``max_i mean_win |ẑ_i − z_i| / RMS_win(z_i)``;
-* ``biggest_mean_signed_relative_error``: ``max_i |mean_win (ẑ_i − z_i)| / RMS_win(z_i)`` (the
-  average of the signed error: the estimate's offset, which noise averages out);
-* ``relative_rms_error``: ``mean_i RMS_win(ẑ_i − z_i) / RMS_win(z_i)`` (tracking);
-* ``rms_error_m``: ``RMS_{i, win}(ẑ_i − z_i)`` (the estimate's oscillation about the truth).
+of Table 1; a record (one seed: :mod:`~railpaper.experiments.partial_state_observer.records`,
+where the numbers of a run are defined) is a row of the numbers of its runs.  This module is the
+reduce: :func:`runs_table` reshapes the records' rows into one row per run, and
+:func:`monte_carlo_metrics` (through :func:`evidence_metrics`) turns them into the ``mc_*``
+metrics of ``metrics.json`` (medians, rates and paired trends over seeds with 95 % intervals,
+:mod:`railpaper.stats`) and the percentiles of the selected reading's max errors.  Nothing here
+decides a verdict: ``data/partial-state-observer/claims.toml`` does.  The deterministic evidence
+(existence, ranks, the printed LMI (19), the wheelsets' stationary RMS) follows.
 """
 
 from __future__ import annotations
@@ -30,70 +17,88 @@ import numpy as np
 import pandas as pd
 
 from railpaper import stats, track
-from railpaper.data import data_path, load_quantities, values
 from railpaper.estimators import functional_observer as fo
+from railpaper.experiments.partial_state_observer.records import (
+    MEASUREMENT,
+    MEASURES,
+    MONTE_CARLO_ESTIMATORS,
+    READINGS,
+    record_column,
+)
+from railpaper.experiments.partial_state_observer.spec import Settings
 from railpaper.models import vertical_10dof as v10
-from railpaper.settling import settling_time_s
 
-#: Measurement set of the chapter's observers: the only one that passes Darouach's conditions.
-MEASUREMENT = "both"
-
-#: Readings of Table 1's suspension rows, default first (data/.../suspension_readings.toml).
-READINGS = ("labels", "symbols")
-SUSPENSION_KEYS = ("primary_stiffness_N_per_m", "primary_damping_Ns_per_m",
-                   "secondary_stiffness_N_per_m", "secondary_damping_Ns_per_m")
+#: The columns of the table of runs (:func:`runs_table`), in order.
+RUN_COLUMNS = ("reading", "seed", "speed_kmh", "estimator") + MEASURES + (
+    "predicted_convergence_s",)
 
 
-def suspension(reading: str) -> dict[str, float]:
-    """Suspension values (SI) of one reading of paper 000's Table 1."""
-    if reading not in READINGS:
-        raise ValueError(f"reading must be one of {READINGS}, got {reading!r}")
-    path = data_path("partial-state-observer/suspension_readings.toml")
-    return values(load_quantities(path, SUSPENSION_KEYS, section=reading))
+def _by_run(table: pd.DataFrame, measure: str, speeds, estimator: str, reading: str) -> np.ndarray:
+    """One measure of ``table``'s runs, seed-major then speed: ``values[seed * n_speeds + j]``."""
+    return np.column_stack([table[record_column(measure, s, estimator, reading)].to_numpy()
+                            for s in speeds]).ravel()
 
 
-
-def run_measures(t_s, z_true, z_est, fixed_threshold_m, fraction: float,
-                 window_start_s: float) -> dict:
-    """Numbers of each run (definitions in the module docstring), for a batch of runs.
+def runs_table(rows: pd.DataFrame, kalman_rows: pd.DataFrame | None,
+               settings: Settings) -> pd.DataFrame:
+    """One row per run (reading, seed, speed, estimator) of the records' rows.
 
     Parameters
     ----------
-    t_s : ndarray, shape (K,)
-        Sample times from the observer's start, s.
-    z_true, z_est : ndarray, shape (..., K, 4)
-        Simulated and estimated wheelset displacements, m (leading axes: runs).
-    fixed_threshold_m : float or ndarray, shape (...)
-        Speed-independent convergence threshold of each run, m.
-    fraction : float
-        Convergence threshold as a fraction of the RMS of each true z_i (0.05).
-    window_start_s : float
-        Errors are measured from this time on, s (1 s).
+    rows : DataFrame
+        The records of :data:`~railpaper.experiments.partial_state_observer.records.MONTE_CARLO`,
+        one per seed.
+    kalman_rows : DataFrame or None
+        The Kalman baseline's records of the selected reading (``settings.suspension_reading``),
+        one per seed (often fewer seeds than ``rows``).
+    settings : Settings
+        The run's settings (speeds, selected reading).
 
     Returns
     -------
-    dict of str to ndarray, shape (...)
+    DataFrame
+        Columns :data:`RUN_COLUMNS`, rows by reading, estimator, seed (as given), speed
+        (ascending); ``predicted_convergence_s`` is -1 where the estimator has no error dynamics
+        of its own.
     """
-    err = np.asarray(z_est) - np.asarray(z_true)
-    i0 = int(np.searchsorted(t_s, window_start_s))        # t_s ascending: the window is a slice
-    ew, zw = err[..., i0:, :], np.asarray(z_true)[..., i0:, :]
-    rms_true = np.sqrt(np.mean(zw**2, axis=-2))
-    duration = float(t_s[-1])
-    thr = fraction * np.sqrt(np.mean(np.asarray(z_true) ** 2, axis=-2))             # (..., p)
-    tc = settling_time_s(t_s, np.all(np.abs(err) < thr[..., None, :], axis=-1), axis=-1)
-    fixed = np.broadcast_to(np.asarray(fixed_threshold_m, float)[..., None], rms_true.shape)
-    tf = settling_time_s(t_s, np.all(np.abs(err) < fixed[..., None, :], axis=-1), axis=-1)
-    mean_rel = np.mean(np.abs(ew), axis=-2) / rms_true
-    return {"convergence_time_s": np.where(tc < 0, duration, tc),
-            "convergence_time_fixed_s": np.where(tf < 0, duration, tf),
-            "converged": (tc >= 0) & (tc <= window_start_s),
-            "max_error_after_1s_m": np.abs(ew).max(axis=(-2, -1)),
-            "mean_relative_error": mean_rel.mean(axis=-1),
-            "biggest_mean_relative_error": mean_rel.max(axis=-1),
-            "biggest_mean_signed_relative_error": (np.abs(np.mean(ew, axis=-2))
-                                                   / rms_true).max(axis=-1),
-            "relative_rms_error": np.mean(np.sqrt(np.mean(ew**2, axis=-2)) / rms_true, axis=-1),
-            "rms_error_m": np.sqrt(np.mean(ew**2, axis=(-2, -1)))}
+    speeds = sorted(settings.speeds_kmh)
+    blocks = []
+    for reading in READINGS:
+        estimators = [(name, rows) for name in MONTE_CARLO_ESTIMATORS]
+        if reading == settings.suspension_reading and kalman_rows is not None and len(kalman_rows):
+            estimators.append(("kalman", kalman_rows))
+        for name, table in estimators:
+            n = len(table)
+            predicted = record_column("predicted_convergence_s", speeds[0], name, reading)
+            blocks.append(pd.DataFrame(
+                {"reading": reading, "seed": np.repeat(table["seed"].to_numpy(), len(speeds)),
+                 "speed_kmh": np.tile(np.asarray(speeds, float), n), "estimator": name}
+                | {m: _by_run(table, m, speeds, name, reading) for m in MEASURES}
+                | {"predicted_convergence_s": (
+                    _by_run(table, "predicted_convergence_s", speeds, name, reading)
+                    if predicted in table.columns else np.full(n * len(speeds), -1.0))}))
+    return pd.concat(blocks, ignore_index=True)[list(RUN_COLUMNS)]
+
+
+def monte_carlo_metrics(rows: pd.DataFrame, kalman_rows: pd.DataFrame | None,
+                        settings: Settings) -> dict:
+    """The chapter's Monte Carlo metrics from its records' rows (the reduce): the ``mc_*``
+    metrics of every reading (:func:`evidence_metrics`) and, for the selected reading, the 5th
+    and 95th percentiles over seeds of each estimator's max error after 1 s at each speed
+    (``max_error_after_1s_m_<speed>kmh[_hb0|_kalman|_q]_p05``, ``_p95``).  Arguments as for
+    :func:`runs_table`."""
+    mc = runs_table(rows, kalman_rows, settings)
+    out = {}
+    for reading in READINGS:
+        out.update(evidence_metrics(mc, reading))
+    own = mc[mc.reading == settings.suspension_reading]
+    suffix = {"paper": "", "kalman": "_kalman", "hb0": "_hb0", "q": "_q"}
+    for speed in settings.speeds_kmh:
+        for name, suf in suffix.items():
+            sub = own[(own.speed_kmh == speed) & (own.estimator == name)]["max_error_after_1s_m"]
+            out[f"max_error_after_1s_m_{speed:g}kmh{suf}_p05"] = float(np.percentile(sub, 5))
+            out[f"max_error_after_1s_m_{speed:g}kmh{suf}_p95"] = float(np.percentile(sub, 95))
+    return out
 
 
 def by_seed_and_speed(mc: pd.DataFrame, reading: str, estimator: str, column: str) -> np.ndarray:

@@ -92,9 +92,10 @@ class PartialStateObserverResult(ChapterResult):
     design : object
         The selected reading's model and observers (``vehicle``, ``model``, ``C``, ``paper``,
         ``hb0``, their discretisations ``paper_zoh``, ``paper_foh``, ``hb0_zoh`` and the Kalman
-        baseline's shaping ``filters`` by speed in km/h).
+        baseline's shaping ``filters`` by speed in km/h):
+        :class:`~railpaper.experiments.partial_state_observer.records.Context`.
     designs : dict of str to object
-        The same for each reading of Table 1 (``labels``, ``symbols``; no Kalman models).
+        The same for each reading of Table 1 (``labels``, ``symbols``).
     records : dict of float to Record
         The single record (seed ``seed``, selected reading) at each speed (km/h).
     estimates : dict of float to Estimates
@@ -103,7 +104,9 @@ class PartialStateObserverResult(ChapterResult):
         The same on the noise-free measurements (with ``paper_foh_m``).
     monte_carlo : DataFrame
         One row per (reading, seed, speed, estimator): convergence times (s, -1 never), errors
-        (m), relative errors and the error dynamics' predicted convergence time (s).
+        (m), relative errors and the error dynamics' predicted convergence time (s)
+        (:func:`~railpaper.experiments.partial_state_observer.evidence.runs_table` of the
+        records' rows).
     alpha_sweep : DataFrame
         Convergence time (s) of the paper's observer against the pole region α (1/s), per speed,
         noisy and noise-free, with the error dynamics' prediction and H B = 0 feasibility.

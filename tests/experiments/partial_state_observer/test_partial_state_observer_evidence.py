@@ -13,7 +13,7 @@ from railpaper.data import data_path, load_quantities, values
 from railpaper.discretise import foh, simulate_foh
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments.partial_state_observer import evidence as ev
-from railpaper.experiments.partial_state_observer import experiment as ch
+from railpaper.experiments.partial_state_observer import records
 from railpaper.experiments.partial_state_observer.spec import SPEC
 from railpaper.models import vertical_10dof as v10
 from railpaper.settling import settling_time_s
@@ -48,7 +48,7 @@ def test_run_measures_by_hand():
     err = np.zeros((5, 4))
     err[0] = 0.5                                              # initial error, gone from t = 0.5
     err[2:, 0] = [0.1, -0.1, 0.1]                              # wheelset 1 oscillates after 1 s
-    m = ev.run_measures(t, z, z + err, 0.2, 0.05, 1.0)
+    m = records.run_measures(t, z, z + err, 0.2, 0.05, 1.0)
     # threshold 5 % of RMS(z_i) = 0.05 i: wheelset 1 never settles (0.1 > 0.05 at the end)
     assert m["convergence_time_s"] == 2.0 and not m["converged"]      # censored at the duration
     assert m["convergence_time_fixed_s"] == 0.5                        # fixed 0.2 > 0.1
@@ -60,13 +60,13 @@ def test_run_measures_by_hand():
     assert m["rms_error_m"] == pytest.approx(np.sqrt(3 * 0.01 / 12))
     # signed: wheelset 1's errors 0.1, -0.1, 0.1 average to 0.1 / 3 (|mean| / RMS 1)
     assert m["biggest_mean_signed_relative_error"] == pytest.approx(0.1 / 3)
-    ok = ev.run_measures(t, z, z + np.where(t[:, None] < 1, 0.5, 0.0), 0.2, 0.05, 1.0)
+    ok = records.run_measures(t, z, z + np.where(t[:, None] < 1, 0.5, 0.0), 0.2, 0.05, 1.0)
     assert ok["converged"] and ok["convergence_time_s"] == 1.0
 
 
 def _runs_table(rng, seeds=7, speeds=(60.0, 80.0, 120.0, 160.0)):
     rows = []
-    for reading in ev.READINGS:
+    for reading in records.READINGS:
         for seed in range(seeds):
             for j, v in enumerate(speeds):
                 for est in ("paper", "paper_noisefree", "paper_fixednoise", "hb0"):
@@ -132,23 +132,23 @@ def test_printed_lmi19_cannot_be_negative_definite():
 
 
 def test_readings_of_table1():
-    labels, symbols = ev.suspension("labels"), ev.suspension("symbols")
+    labels, symbols = records.suspension("labels"), records.suspension("symbols")
     assert labels["primary_stiffness_N_per_m"] == 2.14e6 == symbols["secondary_stiffness_N_per_m"]
     assert labels["primary_damping_Ns_per_m"] == 4.9e4 == symbols["secondary_damping_Ns_per_m"]
     assert labels["secondary_stiffness_N_per_m"] == 2.535e6 == symbols["primary_stiffness_N_per_m"]
     assert labels["secondary_damping_Ns_per_m"] == 1.96e5 == symbols["primary_damping_Ns_per_m"]
     default = values(load_quantities(data_path("partial-state-observer/parameters.toml")))
-    assert {k: default[k] for k in ev.SUSPENSION_KEYS} == labels       # parameters.toml = default
+    assert {k: default[k] for k in records.SUSPENSION_KEYS} == labels       # parameters.toml = default
     with pytest.raises(ValueError):
-        ev.suspension("swapped")
+        records.suspension("swapped")
 
 
 def test_batched_simulators_match_single_runs():
     settings = SPEC.resolve({"duration_s": 0.3, "speeds_kmh": [60.0, 120.0]}, quick=True)
-    ctx = ch._Context(settings, "symbols")
-    t_s, q_in, fixed = ch.track_inputs(ctx, settings, [4, 5], [60.0, 120.0], 310.0)
+    ctx = records.Context(settings, "symbols")
+    t_s, q_in, fixed = records.track_inputs(ctx, settings, [4, 5], [60.0, 120.0], 310.0)
     assert q_in.shape[:2] == (2, 2) and fixed.shape == (2,)
-    tr = ch.simulate_truths(ctx, settings, q_in, t_s, [4, 5], [60.0, 120.0])
+    tr = records.simulate_truths(ctx, settings, q_in, t_s, [4, 5], [60.0, 120.0])
     m = ctx.model
     Phi, G0, G1 = foh(m.A, m.B, settings.dt_s)
     for i in range(2):
@@ -156,8 +156,8 @@ def test_batched_simulators_match_single_runs():
             x0 = -np.linalg.solve(m.A, m.B @ q_in[i, j, 0])
             ref = simulate_foh(Phi, G0, G1, q_in[i, j], x0)[ctx.lead:]
             np.testing.assert_allclose(tr["x"][i, j], ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
-    est = ch.run_kalman(ctx, 120.0, tr, 1, settings.initial_error_m)
-    one = ch.record(tr, 1, 1)
+    est = records.run_kalman(ctx, 120.0, tr, 1, settings.initial_error_m)
+    one = records.record(tr, 1, 1)
     rms = np.sqrt(np.mean(one["y_clean"] ** 2, axis=0))
     kf = kb.steady_state_kalman(*ctx.kalman_model[120.0], np.diag(np.maximum(one["sigma"], 1e-6 * rms) ** 2))
     q, dq = one["q_m"][0], (one["q_m"][1] - one["q_m"][0]) / t_s[1]
@@ -165,16 +165,16 @@ def test_batched_simulators_match_single_runs():
     x0[[12, 14, 16, 18]] += settings.initial_error_m
     x0[20::2] += settings.initial_error_m
     np.testing.assert_allclose(est[1], kf.run(one["y"], x0)[:, [12, 14, 16, 18]], rtol=1e-9, atol=1e-15)
-    hb0 = ch.monte_carlo_runs(ctx, settings, tr, kalman=False)["hb0"]
+    hb0 = records.monte_carlo_runs(ctx, settings, tr, kalman=False)["hb0"]
     np.testing.assert_allclose(hb0[0, 1], ctx.hb0_zoh.run(tr["y"][0, 1], None,
                                                           tr["z_m"][0, 1, 0] + settings.initial_error_m))
 
 
-@pytest.mark.parametrize("reading", ev.READINGS)
+@pytest.mark.parametrize("reading", records.READINGS)
 def test_hb0_poles_at_primary_corner_in_both_readings(reading):
     settings = SPEC.resolve({}, quick=True)
-    ctx = ch._Context(settings, reading, kalman=False)
-    v = v10.load_parameters(**ev.suspension(reading))
+    ctx = records.Context(settings, reading)
+    v = v10.load_parameters(**records.suspension(reading))
     np.testing.assert_allclose(ctx.hb0.poles.real,
                                -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rtol=1e-5)
 
