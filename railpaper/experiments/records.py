@@ -53,12 +53,20 @@ class RecordStudy:
     chunk_records : int
         Records per task: the batch size at which the rows function is efficient.  It changes
         no number.
+    first_record : callable, optional
+        ``first_record(settings)`` → the seed of the study's first record in the chapter's run
+        (default: ``settings.seed``); a larger sample extends it with the seeds that follow.
     """
 
     chapter: str
     name: str
     rows: RowsFunction
     chunk_records: int = 1
+    first_record: Callable[[Any], int] | None = None
+
+    def first(self, settings: Any) -> int:
+        """The seed of the study's first record under ``settings``."""
+        return int(self.first_record(settings) if self.first_record else settings.seed)
 
     def chunks(self, seeds: Sequence[int]) -> list[tuple[int, ...]]:
         """``seeds`` in consecutive chunks of :attr:`chunk_records`."""

@@ -61,14 +61,6 @@ def chapter_studies(chapter: str) -> dict[str, RecordStudy]:
     return {study.name: study for study in studies}
 
 
-def first_seed(chapter: str, settings: Any) -> int:
-    """The first record of the chapter's Monte Carlo (its module's ``first_record``, else the
-    settings' ``seed``)."""
-    module = load_chapter(chapter)
-    return int(module.first_record(settings)) if hasattr(module, "first_record") \
-        else int(settings.seed)
-
-
 def pilot_sigma(declaration: Declaration, rows) -> float:
     """The per-record σ of a row's effect on pilot rows: for a paired change or equivalence of
     [A, B], the delta method's ``sd((B − A) − r A) / |mean A|``; for deviations, their sd."""
@@ -145,7 +137,8 @@ def plan(chapters: list[str]) -> list[StudyPlan]:
             size = registry.get(d.key, {}).get("size")
             if d.study and size:
                 sizes[d.study] = max(size, sizes.get(d.study, 0))
-        plans += [StudyPlan(chapter, study, size, first_seed(chapter, settings))
+        studies = chapter_studies(chapter) if sizes else {}
+        plans += [StudyPlan(chapter, study, size, studies[study].first(settings))
                   for study, size in sizes.items()]
     return plans
 
@@ -231,5 +224,5 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 
 
 __all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "chapter_studies",
-           "check_provenance", "first_seed", "machine", "pilot_sigma", "plan",
+           "check_provenance", "machine", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

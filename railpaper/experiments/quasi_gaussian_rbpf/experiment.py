@@ -214,12 +214,24 @@ def monte_carlo_rows(settings: Settings, seeds: Sequence[int]) -> pd.DataFrame:
 
 #: The Monte Carlo records: one row per record (column ``seed`` = record index, the settings'
 #: ``seed`` staying in the settings), a record at a time as the chapter always ran them.
-MONTE_CARLO = RecordStudy(SPEC.name, "monte_carlo", monte_carlo_rows, chunk_records=1)
+def first_monte_carlo_record(settings: Settings) -> int:
+    """The Monte Carlo records follow the main record."""
+    return settings.record + 1
+
+
+def first_readings_record(settings: Settings) -> int:  # noqa: ARG001 - RecordStudy signature
+    """The readings study's records count from 0 (their streams are (seed, 7004, r))."""
+    return 0
+
+
+MONTE_CARLO = RecordStudy(SPEC.name, "monte_carlo", monte_carlo_rows, chunk_records=1,
+                          first_record=first_monte_carlo_record)
 
 #: The readings study's records (:func:`readings_rows` of
 #: :mod:`~railpaper.experiments.quasi_gaussian_rbpf.readings`): one wide row per record (every
 #: reading, horizon and parameter), column ``seed`` = record.
-READINGS = RecordStudy(SPEC.name, "readings", readings_rows, chunk_records=1)
+READINGS = RecordStudy(SPEC.name, "readings", readings_rows, chunk_records=1,
+                       first_record=first_readings_record)
 
 
 def _timeseries(rep: OneRecord) -> pd.DataFrame:
@@ -294,7 +306,8 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> QuasiGaussianRB
     main = replicate(settings, settings.record)
     first = record_row(settings, main)
     mc_table = normalised(pd.DataFrame([first]))
-    records = list(range(settings.record + 1, settings.record + settings.n_monte_carlo))
+    first_record = MONTE_CARLO.first(settings)
+    records = list(range(first_record, first_record + settings.n_monte_carlo - 1))
     if records:
         others = record_map(MONTE_CARLO, settings, records,
                             lambda fraction, message: progress(0.9 * fraction, message))
@@ -316,7 +329,8 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> QuasiGaussianRB
     readings = None
     if settings.readings_records > 0:
         start = time.perf_counter()
-        rows = record_map(READINGS, settings, range(settings.readings_records),
+        rows = record_map(READINGS, settings, range(
+            READINGS.first(settings), READINGS.first(settings) + settings.readings_records),
                           lambda fraction, message: progress(0.98 + 0.02 * fraction, message))
         readings = study_from_rows(rows, *load_readings())
         metrics.update(readings.metrics())
