@@ -465,6 +465,11 @@ def chapter_claims(chapter: str, out_dir: str | Path) -> str:
             "readings).\n\n" + chapter_table(rows))
 
 
+def chapter_central_claims(chapter: str, out_dir: str | Path) -> str:
+    """A chapter's central claims judged on the run in ``out_dir`` (:func:`central_claims`)."""
+    return central_claims(run_rows(chapter, out_dir)[0])
+
+
 def chapter_claims_figure(chapter: str, out_dir: str | Path) -> Path:
     """Draw the chapter's claims (each paper value against our interval, marked by verdict)
     from the run in ``out_dir`` into ``out_dir/claims_ledger.png``, the figure the chapter's
@@ -537,6 +542,51 @@ def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None)
     return "\n".join(lines)
 
 
+#: What a verdict means, in the words of one plain sentence.
+VERDICT_SENTENCES = {
+    "reproduced": "holds on our evidence",
+    "attainable": "holds only with a method or design that is not the paper's",
+    "artefact": "holds only as an artefact of how the paper computed it",
+    "differs": "does not hold on our evidence",
+    "undecided": "cannot be decided yet: our evidence is not enough either way",
+    "not testable": "cannot be tested: the paper gives nothing to test it against",
+    "missing": "has not been judged: the chapter has not been run",
+}
+
+
+def is_central(row: LedgerRow) -> bool:
+    """A claim a reader who reads nothing else should know: declared central (from the
+    abstract or the conclusion), or — for a chapter still on its v2 rules — a headline row whose
+    source is the abstract or the conclusion."""
+    if row.procedure:
+        return row.central
+    where = row.source.lower()
+    return row.headline and ("abstract" in where or "conclusion" in where)
+
+
+def central_claims(rows: list[LedgerRow]) -> str:
+    """The paper's central claims, one plain sentence each with its verdict (the first row of
+    each central claim: its default reading)."""
+    lines = []
+    for group in claim_groups(rows):
+        head = next((r for r in group if r.headline), group[0])
+        if not is_central(head):
+            continue
+        claim = head.claim.rstrip(". ")
+        lines.append(f"- The paper's claim that {claim} {VERDICT_SENTENCES[head.verdict]} "
+                     f"({verdict_badge(head.verdict)}).")
+    return "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"
+
+
+def central_claims_page(rows: list[LedgerRow], titles: dict[str, str]) -> str:
+    """The intro's section: each paper in one paragraph of its central claims."""
+    lines = []
+    for chapter in dict.fromkeys(r.chapter for r in rows):
+        mine = [r for r in rows if r.chapter == chapter]
+        lines += [f"**{_cell(titles.get(chapter, chapter))}**", "", central_claims(mine)]
+    return "\n".join(lines)
+
+
 def ledger_counts(rows: list[LedgerRow]) -> dict[str, dict[str, int]]:
     """``{chapter: {verdict: count}}``."""
     out: dict[str, dict[str, int]] = {}
@@ -573,6 +623,8 @@ def write_ledger(book_dir: str | Path, chapters: list[str],
     path = Path(book_dir) / "_generated" / "claims_ledger.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(ledger_markdown(rows, {c: title(c) for c in chapters}))
+    path.with_name("central_claims.md").write_text(
+        central_claims_page(rows, {c: title(c) for c in chapters}))
     write_ledger_csv(rows, path.with_suffix(".csv"))
     plot_ledger(rows, {c: title(c) for c in chapters}, path.with_suffix(".png"))
     return path
