@@ -33,6 +33,7 @@ can show the old verdict beside the new one and the intro counts revisions from 
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import tomllib
@@ -191,17 +192,18 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
     """The sample size by power, fixed before the deciding run: rates at the word's threshold
     (σ² = τ(1 − τ)) and the policy's rate margin; single-run rows at α and the policy's
     resolution; paired changes and equivalences from a pilot's per-record σ of the relative
-    effect (None until one is given); None for rows that take no sample."""
+    effect (None until one is given); never fewer than the policy's ``min_records``; None for
+    rows that take no sample."""
     policy, entry = vocabulary.policy, vocabulary.entry(declaration.word_class)
-    level, power = policy["level"], policy["power"]
+    level, power, floor = policy["level"], policy["power"], policy["min_records"]
     if declaration.procedure == "population-rate":
-        return rate_size(entry["threshold"], policy["rate_margin"], level, power)
+        return max(floor, rate_size(entry["threshold"], policy["rate_margin"], level, power))
     if declaration.procedure == "single-run":
-        return single_run_size(policy["alpha_single_run"], policy["single_run_resolution"],
-                               level, power)
+        return max(floor, single_run_size(policy["alpha_single_run"],
+                                          policy["single_run_resolution"], level, power))
     if declaration.procedure in ("paired-change", "equivalence"):
-        return None if pilot_sigma is None else continuous_size(pilot_sigma, entry["margin"],
-                                                                level, power)
+        return None if pilot_sigma is None else max(floor, continuous_size(
+            pilot_sigma, entry["margin"], level, power))
     return None
 
 
@@ -280,7 +282,7 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     implementation).  A sampled row with fewer records than its registered ``size`` is
     *undecided* and says how many it needs."""
     d, policy = declaration, vocabulary.policy
-    entry, level = vocabulary.entry(d.word_class), policy["level"]
+    entry = vocabulary.entry(d.word_class)
     if d.procedure in ("single-run", "population-rate", "paired-change", "equivalence"):
         if rows is None or len(rows) == 0:
             return Decision("undecided", f"no records of study {d.study!r}")
@@ -290,6 +292,40 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
         if size is not None and len(rows) < size:
             return Decision("undecided", f"{len(rows)} records of the {size} registered for it "
                             "(sizes by power, before the deciding run)", n=len(rows))
+    left_out = ""
+    if d.procedure in ("paired-change", "equivalence"):
+        never = (rows[list(d.metrics)].to_numpy(float) == policy["never_code"]).any(axis=1)
+        if never.mean() > policy["never_share_max"]:
+            return Decision("undecided", f"on {int(never.sum())} of {len(rows)} records it never "
+                            f"happened (coded {policy['never_code']:g}), more than "
+                            f"{policy['never_share_max']:.0%}: the rest would be a selected subset",
+                            n=len(rows))
+        if never.any():
+            rows = rows[~never]
+            left_out = (f"; {int(never.sum())} record(s) where it never happened (coded "
+                        f"{policy['never_code']:g}) left out")
+    decision = _sampled(d, entry, policy, rows)
+    if decision is not None:
+        return dataclasses.replace(decision, reason=decision.reason + left_out) if left_out \
+            else decision
+    values = [metrics.get(m) for m in d.metrics]
+    if d.procedure == "implementation":
+        return rulebook.implementation(values[0] if values else None, d.paper_rate_hz)
+    if any(v is None for v in values):
+        return Decision("undecided", f"the run has no metric {d.metrics[values.index(None)]!r}")
+    if d.procedure == "design":
+        return rulebook.design(all(bool(v) for v in values), d.claim)
+    resolution = d.resolution or (0.0,) * len(d.metrics)
+    decisions = [rulebook.deterministic(v, p, r) for v, p, r in
+                 zip(values, d.paper_value, resolution)]
+    differing = [x for x in decisions if x.verdict == "differs"]
+    return differing[0] if differing else decisions[0]
+
+
+def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
+             rows: pd.DataFrame | None) -> Decision | None:
+    """The procedures that read per-record rows (None for the others)."""
+    level = policy["level"]
     if d.procedure == "single-run":
         resolution = d.resolution or (0.0,) * len(d.metrics)
         return rulebook.single_run(rows[list(d.metrics)].to_numpy(dtype=float), d.paper_value,
@@ -308,18 +344,7 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
         return rulebook.equivalence(margin=entry["margin"], level=level,
                                     baseline=rows[d.metrics[0]].to_numpy(float),
                                     other=rows[d.metrics[1]].to_numpy(float))
-    values = [metrics.get(m) for m in d.metrics]
-    if d.procedure == "implementation":
-        return rulebook.implementation(values[0], d.paper_rate_hz)
-    if any(v is None for v in values):
-        return Decision("undecided", f"the run has no metric {d.metrics[values.index(None)]!r}")
-    if d.procedure == "design":
-        return rulebook.design(all(bool(v) for v in values), d.claim)
-    resolution = d.resolution or (0.0,) * len(d.metrics)
-    decisions = [rulebook.deterministic(v, p, r) for v, p, r in
-                 zip(values, d.paper_value, resolution)]
-    differing = [x for x in decisions if x.verdict == "differs"]
-    return differing[0] if differing else decisions[0]
+    return None
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",

@@ -97,6 +97,7 @@ def test_sizes_by_power_from_the_vocabulary():
     assert registered_size(majority, VOCABULARY) == 785
     assert registered_size(declaration(), VOCABULARY) is None       # needs a pilot's σ
     assert registered_size(declaration(), VOCABULARY, pilot_sigma=0.5) == 197
+    assert registered_size(declaration(), VOCABULARY, pilot_sigma=0.01) == 30     # the floor
 
 
 def test_decide_reads_the_study_rows():
@@ -137,3 +138,22 @@ def test_declarations_file_round_trip(tmp_path):
                     'metrics = ["poles_placed"]\ncentral = false\n')
     with pytest.raises(DataError, match="claim id 'a' twice"):
         declarations.load_declarations("demo", VOCABULARY, path)
+
+
+def test_never_happened_is_left_out_and_counted_or_undecides():
+    rng = np.random.default_rng(1)
+    base = 1.0 + 0.1 * rng.standard_normal(100)
+    rows = pd.DataFrame({"time_s_60kmh": base, "time_s_200kmh": base * 1.3})
+    rows.loc[:3, "time_s_200kmh"] = -1.0                     # 4 % never converged: left out
+    decision = decide(declaration(), VOCABULARY, rows, {})
+    assert decision.verdict == "reproduced" and decision.n == 96
+    assert "4 record(s) where it never happened (coded -1) left out" in decision.reason
+    rows.loc[:5, "time_s_60kmh"] = -1.0                      # 6 %: a selected subset
+    decision = decide(declaration(), VOCABULARY, rows, {})
+    assert decision.verdict == "undecided" and "6 of 100 records" in decision.reason
+
+
+def test_a_speed_claim_without_a_metric_is_undecided_or_not_testable():
+    row = declaration(kind="implementation", word_class="real-time", metrics=[], study="",
+                      direction="", paper_rate_hz=10000.0)
+    assert decide(row, VOCABULARY, None, {}).verdict == "undecided"
