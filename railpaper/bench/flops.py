@@ -61,12 +61,12 @@ def step_budget(prob: dict, profile_ms: dict, N: int = 1000, seed: int = 11) -> 
 
     ``profile_ms`` is :func:`railpaper.bench.rbpf_engine.profile_step`'s medians at the same N.
     """
-    p, theta = prob["p"], prob["theta"]
+    settings, theta = prob["settings"], prob["theta"]
     rng = np.random.default_rng(seed)
-    th = theta * rng.uniform(p["prior_low"], p["prior_high"], (N, 5))
+    th = theta * rng.uniform(settings.prior_low, settings.prior_high, (N, 5))
     A = L.a_of_theta(prob["A0"], prob["Ak"], th)
     B = L.input_matrix()
-    K, s = term_counts(A, B, p["dt_s"])
+    K, s = term_counts(A, B, settings.dt_s)
     nnz = int(np.count_nonzero((A != 0).any(axis=0))) + int(np.count_nonzero(B))
     n, m, n_ch = L.N_STATES, B.shape[1], len(L.CHANNELS)
     zoh_madds = float(np.mean([zoh_multiply_adds(nnz, n, m, int(k), int(q))

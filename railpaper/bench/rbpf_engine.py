@@ -36,9 +36,11 @@ from railpaper.engine.kalman_bank import kalman_run
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF
 from railpaper.engine.rbpf import RaoBlackwellisedPF
+from railpaper.experiments.lateral_vehicle import RecordSettings, prior_centre
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.posterior import MIN_MOVES, PROPOSAL
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models import lateral_16state as L
 from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 
@@ -51,30 +53,33 @@ PROFILE_SKIP = 5               # the profiled filter's untimed first steps
 
 
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
-    """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model."""
-    p = dict(E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False))
+    """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model; the
+    chapter's settings under ``"settings"``."""
+    settings = E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False)
     fixed, theta = study.vehicle()
-    data = study.simulate_lateral(p, fixed, theta, seed)
-    Q, R = study.filter_noise(fixed, theta, p, data.du_var_m2ps2)
-    v = p["speed_kmh"] / 3.6
+    data = study.simulate_lateral(RecordSettings.of(settings), fixed, theta, seed)
+    Q, R = study.filter_noise(fixed, theta, RecordSettings.of(settings), data.du_var_m2ps2)
+    v = settings.speed_kmh / 3.6
     A0, Ak = L.affine_terms(fixed, v)
-    fast = L.lateral_system(fixed, v, p["dt_s"], Q, R,
-                            theta_ref=theta * 0.5 * (p["prior_low"] + p["prior_high"]))
+    fast = L.lateral_system(fixed, v, settings.dt_s, Q, R,
+                            theta_ref=prior_centre(theta, settings.prior_low,
+                                                   settings.prior_high))
 
     def textbook(th):                          # stacked scipy expm: the straightforward path
         A = L.a_of_theta(A0, Ak, th)
-        F, G = zoh(A, L.input_matrix(), p["dt_s"])
+        F, G = zoh(A, L.input_matrix(), settings.dt_s)
         return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
 
-    return dict(p=p, theta=theta, y=data.y, u=data.u_mps, Q=Q, R=R, A0=A0, Ak=Ak,
+    return dict(settings=settings, theta=theta, y=data.y, u=data.u_mps, Q=Q, R=R, A0=A0, Ak=Ak,
                 systems={"compiled": fast, "numpy": textbook})
 
 
-def scheme_options(p: dict, scheme: str) -> dict:
+def scheme_options(settings: Settings, scheme: str) -> dict:
     if scheme == "paper":
-        return dict(scheme="paper", delta=p["paper_delta"])
-    return dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
-                tempering_steps=p["tempering_steps"], log_mask=np.ones(5, bool))
+        return dict(scheme="paper", delta=settings.paper_delta)
+    return dict(scheme="working", delta=settings.working_delta,
+                ess_fraction=settings.ess_fraction, tempering_steps=settings.tempering_steps,
+                log_mask=np.ones(5, bool))
 
 
 def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
@@ -82,15 +87,15 @@ def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
     name, _, engine = kind.partition(":")
     engine = engine or "compiled"
     rng = np.random.default_rng(seed)
-    p, theta = prob["p"], prob["theta"]
-    theta0 = theta * rng.uniform(p["prior_low"], p["prior_high"], (N, 5))
+    settings, theta = prob["settings"], prob["theta"]
+    theta0 = theta * rng.uniform(settings.prior_low, settings.prior_high, (N, 5))
     x0, P0 = np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES)
     if name == "qgrbpf":
         return QuasiGaussianRBPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine)
-    opts = scheme_options(p, name.split("-")[1])
+    opts = scheme_options(settings, name.split("-")[1])
     if engine == "filterpy":
         return FilterpyRBPF(prob["A0"], prob["Ak"], L.input_matrix(), L.measurement_matrix,
-                            p["dt_s"], prob["Q"], prob["R"], theta0, x0, P0, rng, **opts)
+                            settings.dt_s, prob["Q"], prob["R"], theta0, x0, P0, rng, **opts)
     return RaoBlackwellisedPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine,
                               **opts)
 
@@ -139,10 +144,10 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
     """IBIS (the chapter's exact-posterior scheme, :func:`railpaper.engine.ibis.run_ibis`
     with the chapter's proposal, prior box and state prior) over steps 1..n_steps at N: seconds
     per step, resampling events, Kalman filter steps run (moves re-run the whole history)."""
-    p, theta = prob["p"], prob["theta"]
+    settings, theta = prob["settings"], prob["theta"]
     t0 = time.perf_counter()
-    run = run_ibis(prob["systems"]["compiled"], prob["y"][:n_steps], p["prior_low"] * theta,
-                   p["prior_high"] * theta, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
+    run = run_ibis(prob["systems"]["compiled"], prob["y"][:n_steps], settings.prior_low * theta,
+                   settings.prior_high * theta, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
                    np.random.default_rng(seed), u=prob["u"][:n_steps], n_particles=N,
                    proposal=PROPOSAL, min_moves=MIN_MOVES)
     return ((time.perf_counter() - t0) / n_steps, len(run.resample_steps),
@@ -404,7 +409,7 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         speedups[key] = baselines[which]["median"]
         spread[key] = [baselines[which]["min"], baselines[which]["max"]]
     spread["steps_per_s_rbpf_lateral_N1000_first1000"] = [first_rates["min"], first_rates["max"]]
-    p = prob["p"]
+    settings = prob["settings"]
     return dict(
         **headline, settled_window=steady, **speedups, **ratios,
         steps_per_s_rbpf_lateral_N1000_first1000=first_rates["median"],
@@ -413,10 +418,11 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         memory_N10000=mem, quick=quick, smoke=smoke,
         sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
-        setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=p["dt_s"],
-                   speed_kmh=p["speed_kmh"], ess_fraction=p["ess_fraction"],
-                   tempering_steps=p["tempering_steps"], working_delta=p["working_delta"],
-                   paper_delta=p["paper_delta"], max_chunk=MAX_CHUNK, first_steps=FIRST_STEPS,
+        setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=settings.dt_s,
+                   speed_kmh=settings.speed_kmh, ess_fraction=settings.ess_fraction,
+                   tempering_steps=settings.tempering_steps,
+                   working_delta=settings.working_delta, paper_delta=settings.paper_delta,
+                   max_chunk=MAX_CHUNK, first_steps=FIRST_STEPS,
                    particles=list(Ns), baseline_N=N),
         machine=dict(machine(), **loads.as_dict()), rows=rows)
 

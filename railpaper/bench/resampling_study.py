@@ -29,8 +29,10 @@ import time
 
 import numpy as np
 
+from railpaper.experiments.lateral_vehicle import RecordSettings
 from railpaper.experiments.rbpf_parameter_estimation import experiment as E
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.experiments.rbpf_parameter_estimation.toy import gaussian_covers
 from railpaper.stats import mean_interval, rate
 from railpaper.threads import one_thread
@@ -41,12 +43,12 @@ SETTINGS = ((None, None), (0.8, None), (0.3, None), (None, 100), (0.8, 100))
 START, WITHIN = 350, 0.05
 
 
-def run_setting(records: list, p: dict, fixed: dict, theta: np.ndarray) -> dict:
-    """Every record through the working scheme with parameters ``p``; the table's statistics."""
+def run_setting(records: list, settings: Settings, fixed: dict, theta: np.ndarray) -> dict:
+    """Every record through the working scheme with ``settings``; the table's statistics."""
     resamplings, seconds, within, covers = [], [], [], []
     for seed, (record, system) in enumerate(records):
         t0 = time.perf_counter()
-        run = study.lateral_rbpf(p, system, record, theta, seed, "working")
+        run = study.lateral_rbpf(settings, system, record, theta, seed, "working")
         seconds.append((time.perf_counter() - t0) / len(record.y))
         resamplings.append(int(run.resampled.sum()))
         rel = run.theta_mean / theta - 1.0
@@ -59,27 +61,27 @@ def run_setting(records: list, p: dict, fixed: dict, theta: np.ndarray) -> dict:
 
 
 def main(n_records: int = 10) -> list[dict]:
-    base = dict(E.SPEC.resolve({}, False))
+    settings = E.SPEC.resolve({}, False)
     fixed, theta = study.vehicle()
     records = []
     for seed in range(n_records):
-        record = study.simulate_lateral(base, fixed, theta, seed)
-        records.append((record, study.filter_system(base, fixed, theta, record)))
+        record = study.simulate_lateral(RecordSettings.of(settings), fixed, theta, seed)
+        records.append((record, study.record_system(settings, fixed, theta, record)))
     rows = []
     for ess, temper in SETTINGS:
-        p = dict(base)
+        varied = settings
         if ess is not None:
-            p["ess_fraction"] = ess
+            varied = varied.replace(ess_fraction=ess)
         if temper is not None:
-            p["tempering_steps"] = temper
-        row = dict(ess_fraction=p["ess_fraction"], tempering_steps=p["tempering_steps"],
-                   **run_setting(records, p, fixed, theta))
+            varied = varied.replace(tempering_steps=temper)
+        row = dict(ess_fraction=varied.ess_fraction, tempering_steps=varied.tempering_steps,
+                   **run_setting(records, varied, fixed, theta))
         rows.append(row)
         print(f"ESS < {row['ess_fraction']:.2f} N, tempering {row['tempering_steps']:4d} steps: "
               f"resamplings {row['resamplings']:5.0f}, {row['steps_per_s']:6.0f} steps/s, "
               "within 5 % from step 350 {:.2f} [{:.2f}, {:.2f}], ".format(*row["within"])
               + "90 % coverage {:.3f} [{:.3f}, {:.3f}]".format(*row["coverage"]), flush=True)
-    print(f"{n_records} records of {len(records[0][0].y)} steps, N = {base['n_particles']}, "
+    print(f"{n_records} records of {len(records[0][0].y)} steps, N = {settings.n_particles}, "
           "chapter defaults otherwise (first row)")
     return rows
 
@@ -93,18 +95,18 @@ def paired_rows(first_seed: int, n_records: int, thresholds=PAIRED_THRESHOLDS) -
     5 % from step 350 on, how many of the 5 parameters its 90 % interval (mean ± 1.645 sd)
     covers at the last step, the largest final |relative error|, the resamplings and the
     seconds of the run.  Chapter defaults otherwise, one thread."""
-    base = dict(E.SPEC.resolve({}, False))
+    settings = E.SPEC.resolve({}, False)
     fixed, theta = study.vehicle()
     rows = []
     with one_thread():
         for seed in range(first_seed, first_seed + n_records):
-            record = study.lateral_record(base, fixed, theta, seed)
-            system = study.filter_system(base, fixed, theta, record)
+            record = study.lateral_record(settings, fixed, theta, seed)
+            system = study.record_system(settings, fixed, theta, record)
             row = {"seed": seed}
             for ess in thresholds:
                 t0 = time.perf_counter()
-                run = study.lateral_rbpf(dict(base, ess_fraction=ess), system, record, theta,
-                                         seed, "working")
+                run = study.lateral_rbpf(settings.replace(ess_fraction=ess), system, record,
+                                         theta, seed, "working")
                 rel = run.theta_mean / theta - 1.0
                 row[f"within_{ess}"] = bool(np.all(np.abs(rel[START - 1:]) <= WITHIN))
                 row[f"covers_{ess}"] = int(np.sum(gaussian_covers(

@@ -176,8 +176,8 @@ def test_orchestration_interleaves_and_keeps_the_keys(monkeypatch):
     """main_payload with fake timings: every comparison alternates its engines, >= 5 times,
     and the payload has the old top-level keys and the new ones."""
     calls = []
-    p = dict(SPEC.resolve({}, False))
-    monkeypatch.setattr(engine, "lateral_problem", lambda n: dict(p=p))
+    settings = SPEC.resolve({}, False)
+    monkeypatch.setattr(engine, "lateral_problem", lambda n: dict(settings=settings))
 
     def fake_time(prob, kind, N, n_steps, per_step=False, skip=0):
         calls.append((kind + (":step" if per_step else ""), N))

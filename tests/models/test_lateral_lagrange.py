@@ -114,7 +114,7 @@ def mismatch(A: np.ndarray, ref: np.ndarray, rtol: float = 1e-9) -> list[tuple[i
 
 def thetas():
     rng = np.random.default_rng(2024)
-    box = rng.uniform(PRIOR["prior_low"], PRIOR["prior_high"], (2, 5))
+    box = rng.uniform(PRIOR.prior_low, PRIOR.prior_high, (2, 5))
     return [THETA, THETA * box[0], THETA * box[1]]
 
 

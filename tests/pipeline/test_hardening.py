@@ -487,9 +487,9 @@ def test_measurements_csv_is_read_where_the_user_is(tmp_path, monkeypatch):
     staging directory: resolving the parameters makes it absolute (empty stays empty)."""
     from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
     monkeypatch.chdir(tmp_path)
-    params = chapter.SPEC.resolve({"measurements_csv": "record.csv"}, quick=True)
-    assert params["measurements_csv"] == str((tmp_path / "record.csv").resolve())
-    assert chapter.SPEC.resolve({}, quick=True)["measurements_csv"] == ""
+    settings = chapter.SPEC.resolve({"measurements_csv": "record.csv"}, quick=True)
+    assert settings.measurements_csv == str((tmp_path / "record.csv").resolve())
+    assert chapter.SPEC.resolve({}, quick=True).measurements_csv == ""
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

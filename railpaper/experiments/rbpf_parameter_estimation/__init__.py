@@ -1,12 +1,13 @@
 """Chapter ``rbpf-parameter-estimation`` (paper 003, Ding et al. 2014): RBPF versus augmented
 EKF, on the Eq. (18) toy and the 16-state lateral vehicle, with the exact posterior beside.
 
-``SPEC`` (the chapter's parameters), ``validate(params)`` and ``run(quick=False, progress=None,
-**params)`` are what the pipeline needs; the modules of the package are the chapter's parts
-(``experiment`` is the whole computation, ``figures`` and ``tables`` draw from its result).
+``SPEC`` (the chapter's parameters), ``Settings`` (their typed values), ``validate(settings)``
+and ``run(settings, progress=None)`` are what the pipeline needs; the modules of the package are
+the chapter's parts (``experiment`` is the whole computation, ``figures`` and ``tables`` draw
+from its result).
 """
 
 from railpaper.experiments.rbpf_parameter_estimation.experiment import run, validate
-from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
 
-__all__ = ["SPEC", "run", "validate"]
+__all__ = ["SPEC", "Settings", "run", "validate"]

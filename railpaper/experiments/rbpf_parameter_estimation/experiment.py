@@ -45,66 +45,74 @@ from railpaper.experiments.rbpf_parameter_estimation.model_error import run_mode
 from railpaper.experiments.rbpf_parameter_estimation.result import (
     RbpfParameterEstimationResult,
 )
-from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
 from railpaper.experiments.rbpf_parameter_estimation.toy import TOY_INITS, run_toy
 from railpaper.models import lateral_16state as L
 from railpaper.threads import one_thread
 
-__all__ = ["SPEC", "run", "validate"]
+__all__ = ["SPEC", "Settings", "run", "validate"]
 
 
-def validate(p: dict) -> None:
-    """Refuse non-physical or inconsistent resolved parameters with one line, before any work."""
-    if not p["prior_low"] < 1.0 < p["prior_high"]:
+def validate(settings: Settings) -> None:
+    """Refuse non-physical or inconsistent settings with one line, before any work."""
+    if not settings.prior_low < 1.0 < settings.prior_high:
         raise ParameterError("prior_low < 1 < prior_high is needed (the box must hold the truth)")
-    if not 1 / 3 < p["paper_delta"] <= 1 or not 1 / 3 < p["working_delta"] <= 1:
+    if not 1 / 3 < settings.paper_delta <= 1 or not 1 / 3 < settings.working_delta <= 1:
         raise ParameterError("Liu-West delta must be in (1/3, 1]")
-    if p["wavelength_min_m"] < 2 * p["speed_kmh"] / 3.6 * p["dt_s"]:
+    if settings.wavelength_min_m < 2 * settings.speed_kmh / 3.6 * settings.dt_s:
         raise ParameterError("wavelength_min_m is shorter than the filter's Nyquist wavelength "
                              "2 V dt_s")
-    if p["spectrum"] not in track.SPECTRA:
-        raise ParameterError(f"parameter 'spectrum': unknown spectrum {p['spectrum']!r}; "
+    if settings.spectrum not in track.SPECTRA:
+        raise ParameterError(f"parameter 'spectrum': unknown spectrum {settings.spectrum!r}; "
                              f"one of {', '.join(track.SPECTRA)}")
-    for name in ("toy_seeds", "n_records", "paper_records", "working_records"):
-        if p[name] >= 1000:
+    for name, value in (("toy_seeds", settings.toy_seeds), ("n_records", settings.n_records),
+                        ("paper_records", settings.paper_records),
+                        ("working_records", settings.working_records)):
+        if value >= 1000:
             raise ParameterError(f"parameter '{name}' must be < 1000 (seed batches 1000 apart are "
-                                 f"disjoint), got {p[name]}")
-    for name in ("ess_fraction", "toy_ess_fraction"):
-        if p[name] > 1:
+                                 f"disjoint), got {value}")
+    for name, value in (("ess_fraction", settings.ess_fraction),
+                        ("toy_ess_fraction", settings.toy_ess_fraction)):
+        if value > 1:
             raise ParameterError(f"{name} must be <= 1")
     fixed, theta = lateral.vehicle()
-    check_sample_time("dt_s", p["dt_s"], L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6),
-                      f"the lateral model at {p['speed_kmh']:g} km/h")
-    check_banks([("toy_particles", p["toy_particles"], p["toy_particles"], 2, 10, "the toy RBPF"),
-                 ("n_particles", p["n_particles"], p["n_particles"] * p["lateral"], L.N_STATES,
-                  L.N_STATES * (L.N_STATES + 7) + 5, "the lateral RBPF, F, H, G per particle"),
-                 ("ibis_particles", p["ibis_particles"], 2 * p["ibis_particles"] * p["lateral"],
+    check_sample_time("dt_s", settings.dt_s,
+                      L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6),
+                      f"the lateral model at {settings.speed_kmh:g} km/h")
+    check_banks([("toy_particles", settings.toy_particles, settings.toy_particles, 2, 10,
+                  "the toy RBPF"),
+                 ("n_particles", settings.n_particles, settings.n_particles * settings.lateral,
+                  L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
+                  "the lateral RBPF, F, H, G per particle"),
+                 ("ibis_particles", settings.ibis_particles,
+                  2 * settings.ibis_particles * settings.lateral,
                   L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
                   "the lateral IBIS sampler, particles and their proposals"),
-                 ("toy_ibis_particles", p["toy_ibis_particles"], 2 * p["toy_ibis_particles"], 2,
-                  10, "the toy IBIS sampler, particles and their proposals")])
-    if p["measurements_csv"]:
-        read_measurements(p["measurements_csv"], p)
+                 ("toy_ibis_particles", settings.toy_ibis_particles,
+                  2 * settings.toy_ibis_particles, 2, 10,
+                  "the toy IBIS sampler, particles and their proposals")])
+    if settings.measurements_csv:
+        read_measurements(settings.measurements_csv, settings.dt_s)
 
 
-def run(*, quick: bool = False, progress=None, **p) -> RbpfParameterEstimationResult:
-    """The whole chapter for resolved parameters ``p`` (see :data:`SPEC`), on one numba and one
-    OpenBLAS thread (:func:`railpaper.threads.one_thread`)."""
+def run(settings: Settings, *, progress=None) -> RbpfParameterEstimationResult:
+    """The whole chapter for ``settings`` (see :data:`SPEC`), on one numba and one OpenBLAS
+    thread (:func:`railpaper.threads.one_thread`)."""
     progress = progress or default_progress()
-    validate(p)
+    validate(settings)
     with one_thread():
-        return _run(p, progress)
+        return _run(settings, progress)
 
 
-def _run(p: dict, progress) -> RbpfParameterEstimationResult:
+def _run(settings: Settings, progress) -> RbpfParameterEstimationResult:
     metrics, timings = {}, {}
     progress(0.02, "toy")
     t0 = time.perf_counter()
-    toy = run_toy(p)
+    toy = run_toy(settings)
     timings["toy_s"] = time.perf_counter() - t0
     st = toy.records
     for ic in (1, 2):                                           # the illustrated record
-        main = st[(st.seed == p["seed"]) & (st.init == ic)].iloc[0]
+        main = st[(st.seed == settings.seed) & (st.init == ic)].iloc[0]
         metrics[f"toy_ekf_diverged_init{ic}"] = bool(main.ekf_diverged)
         metrics[f"toy_ekf_final_abs_error_max_init{ic}"] = float(main.ekf_err_max)
         metrics[f"toy_final_abs_error_max_rbpf_init{ic}"] = float(main.rbpf_err_max)
@@ -115,20 +123,20 @@ def _run(p: dict, progress) -> RbpfParameterEstimationResult:
         singular = np.linalg.svd(eq18_model(start)[0], compute_uv=False)
         metrics[f"toy_ekf_transition_rcond_init{ic}"] = float(singular[-1] / singular[0])
     t0 = time.perf_counter()
-    toy = posterior.toy_posteriors(p, toy)                      # the exact posterior, toy
+    toy = posterior.toy_posteriors(settings, toy)               # the exact posterior, toy
     timings["ibis_toy_s"] = time.perf_counter() - t0
     metrics.update(posterior.toy_metrics(toy))
     metrics.update(evidence.toy_offset_metrics(toy.records, toy.coverage, toy.truth))
     part, ts, mismatch = None, None, None
-    if p["lateral"]:
-        part, more, spent = lateral.run_lateral(p, progress)
+    if settings.lateral:
+        part, more, spent = lateral.run_lateral(settings, progress)
         metrics.update(more)
         timings.update(spent)
         ts = lateral.lateral_timeseries(part)
-    if p["lateral"] and not p["measurements_csv"]:
+    if settings.lateral and not settings.measurements_csv:
         progress(0.9, "model error")
         t0 = time.perf_counter()
-        mismatch, more = run_model_error(p, part)
+        mismatch, more = run_model_error(settings, part)
         metrics.update(more)
         timings["mismatch_s"] = time.perf_counter() - t0
     progress(1.0, "done")
@@ -136,5 +144,5 @@ def _run(p: dict, progress) -> RbpfParameterEstimationResult:
         metrics=metrics, timings=timings, timeseries=ts,
         extra_tables={"toy_timeseries": toy.table(),
                       "toy_record": posterior.toy_record_table(toy.record)},
-        extra_files={"toy_posterior.json": posterior.toy_posterior_json(p, toy.posterior)},
+        extra_files={"toy_posterior.json": posterior.toy_posterior_json(settings, toy.posterior)},
         toy=toy, lateral=part, mismatch=mismatch)

@@ -1,6 +1,7 @@
 """Figures of the rbpf-parameter-estimation chapter, each from a run's
 :class:`~railpaper.experiments.rbpf_parameter_estimation.result.RbpfParameterEstimationResult` and
-resolved parameters; 7 in wide, legends outside the data, display names."""
+its settings (:class:`~railpaper.experiments.rbpf_parameter_estimation.spec.Settings`); 7 in wide,
+legends outside the data, display names."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from railpaper.experiments.display import legend_below
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.experiments.rbpf_parameter_estimation.tables import PARAM_LABELS
 from railpaper.models.lateral_16state import PARAM_NAMES
 
@@ -19,7 +21,7 @@ SCHEMES = {"working": "our working scheme", "paper": "paper's scheme"}
 WINDOW_S = 0.35                                    # the paper's 350 steps at 1 ms
 
 
-def toy_estimates(result, params):
+def toy_estimates(result, settings: Settings):
     """Eq. (18), one record: the estimates of x1..x4 by the three filters from both initial
     conditions, with the true values (paper Figs 2-5)."""
     toy = result.toy
@@ -41,7 +43,7 @@ def toy_estimates(result, params):
     return fig
 
 
-def toy_errors(result, params):
+def toy_errors(result, settings: Settings):
     """Eq. (18), every record: final max |error| per filter and initial condition (log scale),
     and the settle steps of the EKF against the RBPF (paper scheme) from initial condition 1."""
     st, K = result.toy.records, result.toy.steps
@@ -53,10 +55,10 @@ def toy_errors(result, params):
         v = st[st.init == ic][col].to_numpy()
         ax1.scatter(i + rng.uniform(-0.2, 0.2, v.size), v, s=8, color=f"C{i % 3}")
     ax1.set_xticks(range(6), [f"{n}\ninit. {ic}" for ic in (1, 2) for _, n in cols], fontsize=8)
-    ax1.axhline(params["toy_bias_tol"], color="k", ls=":", lw=1)
-    ax1.text(5.4, params["toy_bias_tol"], " convergence\n tolerance", va="center", fontsize=8)
+    ax1.axhline(settings.toy_bias_tol, color="k", ls=":", lw=1)
+    ax1.text(5.4, settings.toy_bias_tol, " convergence\n tolerance", va="center", fontsize=8)
     ax1.set(yscale="log", xlim=(-0.5, 6.6), ylabel="final max |error| over $x_1..x_4$ (1)",
-            title=f"{params['toy_seeds']} records of {K} steps")
+            title=f"{settings.toy_seeds} records of {K} steps")
     one = st[st.init == 1]
     ax2.scatter(one.rbpf_settle, one.ekf_settle, s=12)
     ax2.plot([0, K + 1], [0, K + 1], color="k", lw=0.8)
@@ -66,7 +68,7 @@ def toy_errors(result, params):
     return fig
 
 
-def critical_speed(result, params):
+def critical_speed(result, settings: Settings):
     """Least-damped eigenvalue's real part against speed for three readings of the 'half'
     masses, with the test speed."""
     crit, m = result.lateral.critical_speed, result.metrics
@@ -79,14 +81,14 @@ def critical_speed(result, params):
         ax.plot(crit.speed_kmh, crit[key],
                 label=f"{label}: " + (f"hunting from {vc:.0f} km/h" if vc > 0 else "no hunting"))
     ax.axhline(0, color="k", lw=0.8)
-    ax.axvline(params["speed_kmh"], color="0.5", ls=":", label="test speed")
+    ax.axvline(settings.speed_kmh, color="0.5", ls=":", label="test speed")
     ax.set(xlabel="speed (km/h)", ylabel="max real part of eigenvalues (1/s)")
     fig.tight_layout(rect=(0, 0.2, 1, 1))
     legend_below(fig, ax, ncol=1)
     return fig
 
 
-def normalised_estimates(result, params):
+def normalised_estimates(result, settings: Settings):
     """Top: one record's normalised estimates with the range over records, per scheme. Bottom:
     every record's largest relative error (log), with the 0-0.35 s window shaded."""
     lateral, t = result.lateral, result.lateral.t_s
@@ -99,7 +101,7 @@ def normalised_estimates(result, params):
             ax.fill_between(t, stack[:, :, j].min(0), stack[:, :, j].max(0), color=f"C{j}",
                             alpha=0.12)
         ax.axhspan(0.95, 1.05, color="0.8", zorder=0, label="±5 %")
-        ax.set_title(f"{SCHEMES[scheme]}:\nrecord {params['seed']}, range of {len(stack)}")
+        ax.set_title(f"{SCHEMES[scheme]}:\nrecord {settings.seed}, range of {len(stack)}")
         worst = np.abs(stack - 1).max(axis=2)                       # (records, K)
         ax_err.semilogy(t, worst.T, color="C3" if scheme == "paper" else "C2", lw=0.6, alpha=0.6)
         ax_err.axhline(0.05, color="k", lw=1, label="5 %")
@@ -114,7 +116,7 @@ def normalised_estimates(result, params):
     return fig
 
 
-def relative_errors(result, params):
+def relative_errors(result, settings: Settings):
     """One record (working scheme): |estimate/true - 1| per parameter (log) with the CRLB std
     after 350 steps (dotted) where the true values are known."""
     m, t = result.metrics, result.lateral.t_s
@@ -132,7 +134,7 @@ def relative_errors(result, params):
     return fig
 
 
-def final_errors_over_records(result, params):
+def final_errors_over_records(result, settings: Settings):
     """Every record's final relative error per parameter (dots) and the mean with its 95 % t
     interval (bars), per scheme."""
     m, lateral = result.metrics, result.lateral
@@ -156,12 +158,12 @@ def final_errors_over_records(result, params):
     return fig
 
 
-def ekf_lateral(result, params):
+def ekf_lateral(result, settings: Settings):
     """The augmented EKF on one record from every initial guess: normalised estimates."""
     fig, ax = plt.subplots(figsize=(7, 3.8))
     for i, r in enumerate(result.lateral.illustrated.ekf_norm):
         for j, name in enumerate(PARAM_NAMES):
-            ax.plot(np.arange(1, len(r) + 1) * params["dt_s"], r[:, j], color=f"C{j}", lw=0.7,
+            ax.plot(np.arange(1, len(r) + 1) * settings.dt_s, r[:, j], color=f"C{j}", lw=0.7,
                     label=PARAM_LABELS[name] if i == 0 else None)
     ax.axhspan(0.95, 1.05, color="0.8", zorder=0, label="±5 %")
     ax.set(xlabel="time (s)", ylabel="estimate / true value (1)")
@@ -188,7 +190,7 @@ def _band(ax, t, mean, low, high, key):
             ax.plot(t, edge, color=color, lw=0.6, ls="--")
 
 
-def posterior_vs_filters(result, params):
+def posterior_vs_filters(result, settings: Settings):
     """The illustrated lateral record: for each parameter, the exact posterior's mean and 90 %
     interval and both RBPF schemes' mean ± 1.645 sd, normalised by the true value, over the
     whole record (left) and from 0.3 s on (right, the window of the paper's 350-step claim)."""
@@ -213,7 +215,7 @@ def posterior_vs_filters(result, params):
             ax.axhline(1.0, color="0.3", lw=0.6)
             ax.axvline(WINDOW_S, color="k", ls=":", lw=1)
         axes[j, 0].set_ylabel(f"{PARAM_LABELS[name]} / true (1)")
-    axes[0, 0].set_title(f"record {params['seed']}: the whole record")
+    axes[0, 0].set_title(f"record {settings.seed}: the whole record")
     axes[0, 1].set_title("from 0.3 s (step 350 dotted)")
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
@@ -222,7 +224,7 @@ def posterior_vs_filters(result, params):
     return fig
 
 
-def ekf_model_error(result, params):
+def ekf_model_error(result, settings: Settings):
     """The EKF from every initial guess on the first record: the linear plant (the filter's own
     model, top) and the truth plant with model error (bottom), one panel per parameter; a note
     instead on a user's record (no truth plant)."""
@@ -237,12 +239,12 @@ def ekf_model_error(result, params):
              result.mismatch.ekf_first["mismatch"]))
     fig = plt.figure(figsize=(7, 4.8), layout="constrained")
     for sub, (title, runs) in zip(fig.subfigures(2, 1, hspace=0.04), rows):
-        sub.suptitle(f"{len(runs)} initial guesses, record {params['seed']}: {title}",
+        sub.suptitle(f"{len(runs)} initial guesses, record {settings.seed}: {title}",
                      fontsize=9.5)
         axes = sub.subplots(1, 5, sharex=True)
         for j, (ax, name) in enumerate(zip(axes, PARAM_NAMES)):
             for r in runs:
-                ax.plot(np.arange(1, len(r) + 1) * params["dt_s"], r[:, j], color=f"C{j}",
+                ax.plot(np.arange(1, len(r) + 1) * settings.dt_s, r[:, j], color=f"C{j}",
                         lw=0.7, alpha=0.8)
             ax.axhspan(0.95, 1.05, color="0.8", zorder=0)
             ax.axhline(1.0, color="0.3", lw=0.6)

@@ -8,7 +8,7 @@ scheme and with our working scheme (tempering, ESS-triggered resampling, Liu–W
 resampling, on normalised log-parameters: our modification, not the paper's method), the
 augmented 21-state EKF from one initial guess (``ekf_guesses`` on the first record, as the
 paper's 10), the exact posterior (IBIS) on the first ``ibis_records`` and the Kalman-likelihood
-CRLB on the first record.  One record by hand: :func:`simulate_lateral`, :func:`filter_system`,
+CRLB on the first record.  One record by hand: :func:`lateral_record`, :func:`record_system`,
 :func:`lateral_rbpf`, :func:`lateral_ekf`.  :func:`run_lateral` returns the part, its own
 metrics and its timings; the metrics of a stack of runs are :func:`lateral_metrics`.
 """
@@ -24,9 +24,11 @@ from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.rbpf import FilterRun, run_rbpf
 from railpaper.estimators.ekf import run_augmented_ekf
 from railpaper.experiments.lateral_vehicle import (  # noqa: F401 (the chapter's API)
+    RecordSettings,
     filter_noise,
     filter_system,
     noise_std,
+    prior_centre,
     simulate_lateral,
     vehicle,
 )
@@ -39,6 +41,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRecord,
     LateralRun,
 )
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models import lateral_16state as L
 from railpaper.settling import holds_from, settling_step
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
@@ -46,65 +49,78 @@ from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
 WITHIN = 0.05
 
 
-def lateral_record(p: dict, fixed: dict, theta: np.ndarray, seed: int) -> LateralRecord:
+def lateral_record(settings: Settings, fixed: dict, theta: np.ndarray, seed: int
+                   ) -> LateralRecord:
     """The record of seed ``seed``: the user's file when ``measurements_csv`` is set (every
-    seed), else :func:`simulate_lateral`."""
-    if p["measurements_csv"]:
-        return read_measurements(p["measurements_csv"], p)
-    return simulate_lateral(p, fixed, theta, seed)
+    seed), else :func:`simulate_lateral` at the record settings of ``settings``."""
+    if settings.measurements_csv:
+        return read_measurements(settings.measurements_csv, settings.dt_s)
+    return simulate_lateral(RecordSettings.of(settings), fixed, theta, seed)
 
 
-def lateral_rbpf(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int,
+def record_system(settings: Settings, fixed: dict, theta: np.ndarray, record: LateralRecord):
+    """``system(theta)``, the filters' model of ``record``: :func:`filter_system` at the record
+    settings of ``settings``, its ZOH balanced at the prior box's centre
+    (:func:`prior_centre`)."""
+    return filter_system(RecordSettings.of(settings), fixed, theta, record,
+                         theta_ref=prior_centre(theta, settings.prior_low, settings.prior_high))
+
+
+def lateral_rbpf(settings: Settings, system, record: LateralRecord, theta: np.ndarray, seed: int,
                  scheme: str) -> FilterRun:
     """One RBPF run on a record: ``n_particles`` particles θ × U(``prior_low``, ``prior_high``)
     per parameter (generator ``[seed, 11]``: both schemes start from the same particles), each
     with a Kalman filter from X = 0; ``scheme="paper"`` (Steps 1–2.6, δ = ``paper_delta``) or
     ``"working"`` (tempering, ESS-triggered resampling, moves of log-parameters)."""
     rng = np.random.default_rng([seed, 11])
-    theta0 = theta * rng.uniform(p["prior_low"], p["prior_high"], (p["n_particles"], 5))
-    opts = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
-            dict(scheme="working", delta=p["working_delta"], ess_fraction=p["ess_fraction"],
-                 tempering_steps=p["tempering_steps"], log_mask=np.ones(5, bool)))
+    theta0 = theta * rng.uniform(settings.prior_low, settings.prior_high,
+                                 (settings.n_particles, 5))
+    opts = (dict(scheme="paper", delta=settings.paper_delta) if scheme == "paper" else
+            dict(scheme="working", delta=settings.working_delta,
+                 ess_fraction=settings.ess_fraction, tempering_steps=settings.tempering_steps,
+                 log_mask=np.ones(5, bool)))
     return run_rbpf(system, record.y, theta0, np.zeros(L.N_STATES),
                     1e-10 * np.eye(L.N_STATES), rng, u=record.u_mps, **opts)
 
 
-def run_lateral_rbpf(p, fixed, theta, record: LateralRecord, seed: int, scheme: str
-                     ) -> np.ndarray:
+def run_lateral_rbpf(settings: Settings, fixed, theta, record: LateralRecord, seed: int,
+                     scheme: str) -> np.ndarray:
     """Normalised estimates θ̂/θ (K, 5) of one RBPF run (:func:`lateral_rbpf`)."""
-    system = filter_system(p, fixed, theta, record)
-    return lateral_rbpf(p, system, record, theta, seed, scheme).theta_mean / theta
+    system = record_system(settings, fixed, theta, record)
+    return lateral_rbpf(settings, system, record, theta, seed, scheme).theta_mean / theta
 
 
-def lateral_crlb(p, fixed, theta, record: LateralRecord) -> dict:
+def lateral_crlb(settings: Settings, fixed, theta, record: LateralRecord) -> dict:
     """Relative CRLB after 350 and n_steps steps, input known / unknown (process noise)."""
-    v = p["speed_kmh"] / 3.6
+    v = settings.speed_kmh / 3.6
     out = {}
     for label, var, u in (("known", record.du_var_m2ps2, record.u_mps),
                           ("unknown", record.u_var_m2ps2, None)):
-        Q, R = filter_noise(fixed, theta, p, var)
-        info = fisher_information(L.lateral_system(fixed, v, p["dt_s"], Q, R, theta_ref=theta),
+        Q, R = filter_noise(fixed, theta, RecordSettings.of(settings), var)
+        info = fisher_information(L.lateral_system(fixed, v, settings.dt_s, Q, R,
+                                                   theta_ref=theta),
                                   theta, record.y,
                                   np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), u,
-                                  checkpoints=(350, p["n_steps"]))
+                                  checkpoints=(350, settings.n_steps))
         for c, I in info.items():
             out[(label, c)] = crlb_std(I) / theta
     return out
 
 
-def lateral_ekf(p, fixed, theta, record: LateralRecord, seed, guesses: int) -> list[np.ndarray]:
+def lateral_ekf(settings: Settings, fixed, theta, record: LateralRecord, seed, guesses: int
+                ) -> list[np.ndarray]:
     """Normalised EKF estimates (K, 5) from ``guesses`` guesses U(prior box) x θ (generator
     ``[seed, 13]``; NaN rows if the run diverged); K = min(ekf_steps, n_steps).  Empty on
     a user's record (``record.seed`` None): the chapter judges the EKF on simulated records only."""
     if record.seed is None:
         return []
-    Q, R = filter_noise(fixed, theta, p, record.du_var_m2ps2)
-    model = L.ekf_model(fixed, p["speed_kmh"] / 3.6, p["dt_s"])
+    Q, R = filter_noise(fixed, theta, RecordSettings.of(settings), record.du_var_m2ps2)
+    model = L.ekf_model(fixed, settings.speed_kmh / 3.6, settings.dt_s)
     rng = np.random.default_rng([seed, 13])
     runs = []
     for _ in range(guesses):
-        guess = theta * rng.uniform(p["prior_low"], p["prior_high"], 5)
-        K = min(p["ekf_steps"], p["n_steps"])
+        guess = theta * rng.uniform(settings.prior_low, settings.prior_high, 5)
+        K = min(settings.ekf_steps, settings.n_steps)
         r = run_augmented_ekf(model, record.y[:K], guess, np.zeros(L.N_STATES),
                               1e-10 * np.eye(L.N_STATES), (0.3 * theta) ** 2, Q, R,
                               (1e-4 * theta) ** 2, u=record.u_mps[:K], divergence_bound=1e12)
@@ -117,7 +133,8 @@ def ekf_converged(norm: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(norm[-1])) and np.all(np.abs(norm[-1] - 1) <= WITHIN))
 
 
-def critical_speeds(fixed: dict, theta: np.ndarray, p: dict) -> tuple[pd.DataFrame, dict]:
+def critical_speeds(fixed: dict, theta: np.ndarray, settings: Settings
+                    ) -> tuple[pd.DataFrame, dict]:
     """Least-damped real part vs speed for the three readings of "half", and the metrics (the
     critical speeds, km/h; the least-damped real part at the chapter's speed, 1/s)."""
     metrics = {}
@@ -129,7 +146,7 @@ def critical_speeds(fixed: dict, theta: np.ndarray, p: dict) -> tuple[pd.DataFra
         re, vc = L.critical_speed(fx, theta, speeds)
         curves[key] = re
         metrics[f"critical_speed_kmh_{key}"] = vc * 3.6 if vc > 0 else -1
-    A = L.build_A_direct(fixed, theta, p["speed_kmh"] / 3.6)
+    A = L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6)
     metrics["least_damped_real_at_speed_per_s"] = L.least_damped(A)[0]
     return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves}), metrics
 
@@ -174,51 +191,53 @@ def lateral_metrics(runs: list[np.ndarray], suffix: str, start: int = 350,
     return out
 
 
-def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
+def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
     """Part 2: critical speed, both RBPF schemes and one EKF guess on every record (the first:
     ``ekf_guesses`` and the CRLB), the exact posterior (IBIS) on the first ``ibis_records``.
     Returns the part, its metrics and its timings (s)."""
     timings = {}
     fixed, theta = vehicle()
-    critical, metrics = critical_speeds(fixed, theta, p)
-    user = bool(p["measurements_csv"])
+    critical, metrics = critical_speeds(fixed, theta, settings)
+    user = bool(settings.measurements_csv)
+    n_steps, n_records = settings.n_steps, settings.n_records
     if user:
-        first = lateral_record(p, fixed, theta, p["seed"])
-        p = dict(p, n_steps=len(first.y), n_records=1)
-    n_ibis = min(p["ibis_records"], p["n_records"])
+        first = lateral_record(settings, fixed, theta, settings.seed)
+        n_steps, n_records = len(first.y), 1
+    n_ibis = min(settings.ibis_records, n_records)
     runs, ekf_first, crlb, ekf_count = [], [], None, None
     spent = {"working": 0.0, "paper": 0.0, "ibis": 0.0}
-    for i in range(p["n_records"]):
-        progress(0.1 + 0.6 * i / p["n_records"], f"lateral record {i}")
-        seed = p["seed"] + i
-        rec = first if user else lateral_record(p, fixed, theta, seed)
-        system, fr = filter_system(p, fixed, theta, rec), {}
+    for i in range(n_records):
+        progress(0.1 + 0.6 * i / n_records, f"lateral record {i}")
+        seed = settings.seed + i
+        rec = first if user else lateral_record(settings, fixed, theta, seed)
+        system, fr = record_system(settings, fixed, theta, rec), {}
         for scheme in ("working", "paper"):
             t0 = time.perf_counter()
-            fr[scheme] = lateral_rbpf(p, system, rec, theta, seed, scheme)
+            fr[scheme] = lateral_rbpf(settings, system, rec, theta, seed, scheme)
             spent[scheme] += time.perf_counter() - t0
         post = None
         if i < n_ibis:
             t0 = time.perf_counter()
-            post = posterior.lateral_posterior(p, system, rec, theta, seed)
+            post = posterior.lateral_posterior(settings, system, rec, theta, seed)
             spent["ibis"] += time.perf_counter() - t0
         ekf = []
         if not user:
             if i == 0:
                 progress(0.15, "CRLB and EKF")
                 t0 = time.perf_counter()
-                crlb, more = lateral_crlb_metrics(p, fixed, theta, rec)
+                crlb, more = lateral_crlb_metrics(settings, fixed, theta, rec)
                 metrics.update(more)
                 timings["crlb_s"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            ekf = lateral_ekf(p, fixed, theta, rec, seed, p["ekf_guesses"] if i == 0 else 1)
+            ekf = lateral_ekf(settings, fixed, theta, rec, seed,
+                              settings.ekf_guesses if i == 0 else 1)
             timings["ekf_lateral_s"] = (timings.get("ekf_lateral_s", 0.0)
                                         + time.perf_counter() - t0)
             ekf_first.append(ekf_converged(ekf[0]))
             if i == 0:
                 ekf_count = int(sum(map(ekf_converged, ekf)))
                 metrics["ekf_lateral_converged_count"] = ekf_count
-                if p["ekf_guesses"] == 10:
+                if settings.ekf_guesses == 10:
                     metrics["ekf_lateral_converged_of_10"] = ekf_count
         runs.append(LateralRun(None if user else seed, fr["paper"].theta_mean / theta,
                                fr["working"].theta_mean / theta, tuple(ekf),
@@ -227,23 +246,23 @@ def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
     # records n_records … paper_records - 1 (paper scheme) and … working_records - 1 (working
     # scheme): each scheme's claims need more records than the other estimators
     alone = {"paper": [], "working": []}
-    extra = max(p["paper_records"], p["working_records"]) - p["n_records"]
+    wanted = {"paper": settings.paper_records, "working": settings.working_records}
+    extra = max(wanted.values()) - n_records
     if not user:
-        for i in range(p["n_records"], p["n_records"] + extra):   # none if both are <= n
-            schemes = [s for s in ("working", "paper") if i < p[f"{s}_records"]]
-            progress(0.7 + 0.2 * (i - p["n_records"]) / extra,
+        for i in range(n_records, n_records + extra):             # none if both are <= n
+            schemes = [s for s in ("working", "paper") if i < wanted[s]]
+            progress(0.7 + 0.2 * (i - n_records) / extra,
                      f"lateral record {i}, {' and '.join(schemes)} scheme alone")
-            seed = p["seed"] + i
-            rec = lateral_record(p, fixed, theta, seed)
-            system = filter_system(p, fixed, theta, rec)
+            seed = settings.seed + i
+            rec = lateral_record(settings, fixed, theta, seed)
+            system = record_system(settings, fixed, theta, rec)
             for scheme in schemes:
                 t0 = time.perf_counter()
-                fr = lateral_rbpf(p, system, rec, theta, seed, scheme)
+                fr = lateral_rbpf(settings, system, rec, theta, seed, scheme)
                 spent[scheme] += time.perf_counter() - t0
                 alone[scheme].append(fr.theta_mean / theta)
     for scheme in ("working", "paper"):
-        timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / (p["n_records"]
-                                                               + len(alone[scheme]))
+        timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / (n_records + len(alone[scheme]))
     timings["ibis_lateral_per_run_s"] = spent["ibis"] / n_ibis
     for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
         norm = getattr(runs[0], field)                          # the illustrated record
@@ -256,7 +275,7 @@ def run_lateral(p: dict, progress) -> tuple[LateralPart, dict, dict]:
     # Rao-Blackwellisation (paper §4): the augmented state (16 + 5) vs what the particles sample
     metrics["rb_augmented_state_dim"] = L.N_STATES + theta.size
     metrics["rb_particle_dim"] = int(runs[0].rbpf_paper_norm.shape[1])
-    t_s = np.arange(1, p["n_steps"] + 1) * p["dt_s"]
+    t_s = np.arange(1, n_steps + 1) * settings.dt_s
     part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
                        critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count,
                        paper_only_norm=np.array(alone["paper"]).reshape(-1, len(t_s), theta.size),
@@ -280,15 +299,16 @@ def lateral_timeseries(part: LateralPart) -> pd.DataFrame:
                          **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
 
 
-def lateral_crlb_metrics(p, fixed, theta, rec: LateralRecord) -> tuple[pd.DataFrame, dict]:
+def lateral_crlb_metrics(settings: Settings, fixed, theta, rec: LateralRecord
+                         ) -> tuple[pd.DataFrame, dict]:
     """CRLB of the first record: the table of :attr:`LateralPart.crlb` and the metrics
     ``crlb_rel_*`` (relative standard deviations, 1)."""
-    cr = lateral_crlb(p, fixed, theta, rec)
+    cr = lateral_crlb(settings, fixed, theta, rec)
     metrics = {}
     rows = []
     for j, name in enumerate(L.PARAM_NAMES):
         metrics[f"crlb_rel_350_{name}"] = float(cr[("known", 350)][j])
-        metrics[f"crlb_rel_final_{name}"] = float(cr[("known", p["n_steps"])][j])
+        metrics[f"crlb_rel_final_{name}"] = float(cr[("known", settings.n_steps)][j])
         metrics[f"crlb_rel_350_unknown_input_{name}"] = float(cr[("unknown", 350)][j])
         rows.append(dict(parameter=name, **{f"{a}_{c}": cr[(a, c)][j] for a, c in cr}))
     return pd.DataFrame(rows), metrics

@@ -12,10 +12,11 @@ from railpaper.models import lateral_16state as L
 CSV_INPUT = ("ydot_t1_mps", "ydot_t2_mps")
 
 
-def read_measurements(path: str, p: dict) -> LateralRecord:
+def read_measurements(path: str, dt_s: float) -> LateralRecord:
     """A user's record: columns ``t_s`` and :data:`L.CHANNELS` (SI units), optionally the track
-    lateral velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s``.  Without
-    the track velocities the filters' process noise assumes input changes of 0.04 m/s std."""
+    lateral velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s`` (s).
+    Without the track velocities the filters' process noise assumes input changes of 0.04 m/s
+    std."""
     try:
         frame = pd.read_csv(path)
     except (OSError, ValueError) as exc:
@@ -37,8 +38,8 @@ def read_measurements(path: str, p: dict) -> LateralRecord:
     if np.any(dt <= 0):
         raise ParameterError(f"measurements_csv: t_s is not increasing (data row "
                              f"{int(np.argmax(dt <= 0)) + 2})")
-    if np.any(np.abs(dt - p["dt_s"]) > 1e-6 * p["dt_s"] + 1e-9):
-        raise ParameterError(f"measurements_csv: t_s must step uniformly by dt_s = {p['dt_s']} s")
+    if np.any(np.abs(dt - dt_s) > 1e-6 * dt_s + 1e-9):
+        raise ParameterError(f"measurements_csv: t_s must step uniformly by dt_s = {dt_s} s")
     has_u = all(c in frame.columns for c in CSV_INPUT)
     u = arr[:, 6:8] if has_u else None
     y = arr[:, 1:6]

@@ -41,9 +41,10 @@ import pandas as pd
 from railpaper import contact, sensors, track
 from railpaper.data import load_quantities
 from railpaper.experiments.base import no_progress
+from railpaper.experiments.lateral_vehicle import RecordSettings
 from railpaper.experiments.rbpf_parameter_estimation import lateral
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralRecord
-from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC
+from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
 from railpaper.models import lateral_16state as L
 from railpaper.models import lateral_truth as T
 from railpaper.paths import DATA_DIR
@@ -115,40 +116,41 @@ def mismatch_settings(path: Path | None = None, components=COMPONENTS,
                 lowpass_order=int(q["lowpass_order"].value))
 
 
-def track_input(p: dict, fixed: dict, seed: int) -> np.ndarray:
+def track_input(settings: Settings, fixed: dict, seed: int) -> np.ndarray:
     """ẏt under both wheelsets at the truth rate, (K_fine + 1, 2), m/s — the chapter's
     :func:`~railpaper.experiments.rbpf_parameter_estimation.experiment.simulate_lateral` input (same
     profile for the same seed; ``tests/experiments/rbpf_parameter_estimation/test_mismatch.py`` checks the records agree)."""
-    v = p["speed_kmh"] / 3.6
-    dtf = p["dt_s"] / p["truth_substeps"]
-    dur = p["n_steps"] * p["dt_s"]
-    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * p["wavelength_max_m"])
-    s, z = track.synthesize_profile(p["spectrum"], "alignment", length,
-                                    min(0.05, p["wavelength_min_m"] / 2), seed=seed,
-                                    wavelength_min_m=p["wavelength_min_m"],
-                                    wavelength_max_m=p["wavelength_max_m"])
+    v = settings.speed_kmh / 3.6
+    dtf = settings.dt_s / settings.truth_substeps
+    dur = settings.n_steps * settings.dt_s
+    length = max(v * dur + 2 * fixed["a"] + 10.0, 1.05 * settings.wavelength_max_m)
+    s, z = track.synthesize_profile(settings.spectrum, "alignment", length,
+                                    min(0.05, settings.wavelength_min_m / 2), seed=seed,
+                                    wavelength_min_m=settings.wavelength_min_m,
+                                    wavelength_max_m=settings.wavelength_max_m)
     return track.wheelset_inputs(s, z, v, [0.0, 2 * fixed["a"]], dtf, dur, derivative=True)[2]
 
 
-def chain_output(signal_fine: np.ndarray, noise: np.ndarray, p: dict, st: dict) -> np.ndarray:
+def chain_output(signal_fine: np.ndarray, noise: np.ndarray, settings: Settings, st: dict
+                 ) -> np.ndarray:
     """Measurements (n_steps, 5) at dt_s from the plant's channels on the fine grid.
 
     ``signal_fine[k]`` is the channel vector at fine time k dt_fine (k = 0..), ``noise`` the
     sensor noise at the filter samples.  Row k-1 belongs to filter step k (time k dt_s).
     """
-    sub, n = p["truth_substeps"], p["n_steps"]
+    sub, n = settings.truth_substeps, settings.n_steps
     if "lowpass" not in st["components"]:
         return signal_fine[sub::sub][:n] + noise
     filt = dict(cutoff_hz=st["lowpass_cutoff_hz"], order=st["lowpass_order"])
     if st["chain"] == "sensor":
-        smooth = sensors.lowpass(signal_fine, sample_rate_hz=sub / p["dt_s"], **filt)
+        smooth = sensors.lowpass(signal_fine, sample_rate_hz=sub / settings.dt_s, **filt)
         return smooth[sub::sub][:n] + noise
     # from rest: a zero sample at t = 0 (the plant is at rest) would leave the filter at rest
-    return sensors.lowpass(signal_fine[sub::sub][:n] + noise, sample_rate_hz=1.0 / p["dt_s"],
+    return sensors.lowpass(signal_fine[sub::sub][:n] + noise, sample_rate_hz=1.0 / settings.dt_s,
                            zero_phase=st["chain"] == "paper_zero_phase", **filt)
 
 
-def simulate_mismatch(p: dict, fixed: dict, theta: np.ndarray, seed: int, st: dict
+def simulate_mismatch(settings: Settings, fixed: dict, theta: np.ndarray, seed: int, st: dict
                       ) -> tuple[LateralRecord, dict]:
     """One record of the truth plant with settings ``st`` (:func:`mismatch_settings`).
 
@@ -160,22 +162,22 @@ def simulate_mismatch(p: dict, fixed: dict, theta: np.ndarray, seed: int, st: di
     diagnostics : dict
         The plant's size on this record (see :class:`MismatchResult` ``records``).
     """
-    v, sub = p["speed_kmh"] / 3.6, p["truth_substeps"]
-    dtf = p["dt_s"] / sub
-    dq = track_input(p, fixed, seed)
+    v, sub = settings.speed_kmh / 3.6, settings.truth_substeps
+    dtf = settings.dt_s / sub
+    dq = track_input(settings, fixed, seed)
     wr = T.WheelRail(st["friction"], st["wheel_load_N"], st["conicity_scale_m"])
     x = T.simulate_truth(fixed, theta, v, dtf, dq[:-1], wr)
     plant = T.TruthPlant(fixed, theta, v, wr)
     rng = np.random.default_rng([seed, 7])                  # the chapter's noise draws
-    std = lateral.noise_std(p)
-    noise = rng.standard_normal((p["n_steps"], 5)) * std
-    y = chain_output(plant.measurements(x), noise, p, st)
+    std = lateral.noise_std(RecordSettings.of(settings))
+    noise = rng.standard_normal((settings.n_steps, 5)) * std
+    y = chain_output(plant.measurements(x), noise, settings, st)
     # noise-free model error against the linear plant, in units of each channel's noise std
     x_lin = L.simulate_truth(fixed, theta, v, dtf, dq[:-1])
     lin = x_lin @ L.measurement_matrix(L.build_A_direct(fixed, theta, v)).T
     zero = np.zeros_like(noise)
-    err = (chain_output(plant.measurements(x), zero, p, st)
-           - chain_output(lin, zero, p, dict(st, components=())))     # what the filters expect
+    err = (chain_output(plant.measurements(x), zero, settings, st)
+           - chain_output(lin, zero, settings, dict(st, components=())))  # what the filters expect
     d = x[:, 14:16]
     rms_d = float(np.sqrt(np.mean(d ** 2)))
     scale = st["conicity_scale_m"]
@@ -185,7 +187,7 @@ def simulate_mismatch(p: dict, fixed: dict, theta: np.ndarray, seed: int, st: di
                 if np.isfinite(scale) and rms_d > 0 else 1.0,
                 **{f"model_error_{c}": float(e) for c, e in
                    zip(L.CHANNELS, np.sqrt(np.mean(err ** 2, axis=0)) / std)})
-    record = LateralRecord(seed=seed, y=y, u_mps=dq[0:-1:sub][:p["n_steps"]],
+    record = LateralRecord(seed=seed, y=y, u_mps=dq[0:-1:sub][:settings.n_steps],
                                    du_var_m2ps2=np.diff(dq[::sub], axis=0).var(axis=0),
                                    u_var_m2ps2=dq.var(axis=0))
     return record, diag
@@ -196,10 +198,11 @@ def _diverged(norm: np.ndarray) -> bool:
     return not bool(np.all(np.isfinite(norm[-1])))
 
 
-def _filter_record(p, fixed, theta, rec, seed, guesses) -> tuple[dict, np.ndarray, list]:
+def _filter_record(settings: Settings, fixed, theta, rec, seed, guesses
+                   ) -> tuple[dict, np.ndarray, list]:
     """Working-scheme RBPF and ``guesses`` EKF runs on one record; the row of ``records``."""
-    norm = lateral.run_lateral_rbpf(p, fixed, theta, rec, seed, "working")
-    ekf = lateral.lateral_ekf(p, fixed, theta, rec, seed, guesses)
+    norm = lateral.run_lateral_rbpf(settings, fixed, theta, rec, seed, "working")
+    ekf = lateral.lateral_ekf(settings, fixed, theta, rec, seed, guesses)
     row = dict(seed=seed, ekf_converged=lateral.ekf_converged(ekf[0]),
                ekf_converged_count=int(sum(map(lateral.ekf_converged, ekf))),
                ekf_diverged=_diverged(ekf[0]), ekf_diverged_count=int(sum(map(_diverged, ekf))),
@@ -228,7 +231,7 @@ def plant_metrics(rows: pd.DataFrame, runs: list, ekf_first: list, suffix: str,
     return out
 
 
-def run_mismatch(p: dict, n_records: int | None = None, *, components=COMPONENTS,
+def run_mismatch(settings: Settings, n_records: int | None = None, *, components=COMPONENTS,
                  chain: str = "paper", matched: bool = True, ekf_guesses_per_record: int = 1,
                  mismatch_path: Path | None = None, progress=None) -> MismatchResult:
     """EKF (``ekf_guesses`` guesses on the first record) and working-scheme RBPF on the truth
@@ -236,11 +239,11 @@ def run_mismatch(p: dict, n_records: int | None = None, *, components=COMPONENTS
 
     Parameters
     ----------
-    p : dict
-        The chapter's resolved parameters (names of
-        :data:`~railpaper.experiments.rbpf_parameter_estimation.experiment.SPEC`; ``n_steps`` >= 350).
+    settings : Settings
+        The chapter's settings (``n_steps`` >= 350).
     n_records : int, optional
-        Records (seeds ``p["seed"]``, ``p["seed"] + 1``, …; >= 2); default ``p["n_records"]``.
+        Records (seeds ``settings.seed``, ``settings.seed + 1``, …; >= 2); default
+        ``settings.n_records``.
     components : iterable of str
         Which of :data:`COMPONENTS` the truth plant has (the others stay linear).
     chain : str
@@ -271,8 +274,8 @@ def run_mismatch(p: dict, n_records: int | None = None, *, components=COMPONENTS
         ``mismatch_model_error_median_<channel>`` (1, see ``records``).
     """
     progress = progress or no_progress
-    n_records = int(p["n_records"] if n_records is None else n_records)
-    if n_records < 2 or p["n_steps"] < START:
+    n_records = int(settings.n_records if n_records is None else n_records)
+    if n_records < 2 or settings.n_steps < START:
         raise ValueError(f"run_mismatch needs n_records >= 2 and n_steps >= {START}")
     st = mismatch_settings(mismatch_path, components, chain)
     fixed, theta = lateral.vehicle()
@@ -281,15 +284,17 @@ def run_mismatch(p: dict, n_records: int | None = None, *, components=COMPONENTS
     timings = {f"{k}_{part}_s": 0.0 for k in plants for part in ("simulate", "filter")}
     with one_thread():
         for i in range(n_records):
-            seed = p["seed"] + i
+            seed = settings.seed + i
             for plant in plants:
                 progress(i / n_records, f"record {i}, {plant} plant")
                 t0 = time.perf_counter()
-                rec, diag = (simulate_mismatch(p, fixed, theta, seed, st) if plant == "mismatch"
-                             else (lateral.simulate_lateral(p, fixed, theta, seed), {}))
+                rec, diag = (simulate_mismatch(settings, fixed, theta, seed, st)
+                             if plant == "mismatch" else
+                             (lateral.simulate_lateral(RecordSettings.of(settings), fixed, theta,
+                                                       seed), {}))
                 t1 = time.perf_counter()
-                guesses = p["ekf_guesses"] if i == 0 else ekf_guesses_per_record
-                row, norm, ekf = _filter_record(p, fixed, theta, rec, seed, guesses)
+                guesses = settings.ekf_guesses if i == 0 else ekf_guesses_per_record
+                row, norm, ekf = _filter_record(settings, fixed, theta, rec, seed, guesses)
                 timings[f"{plant}_simulate_s"] += t1 - t0
                 timings[f"{plant}_filter_s"] += time.perf_counter() - t1
                 rows.append(dict(plant=plant, **row, **diag))
@@ -300,7 +305,7 @@ def run_mismatch(p: dict, n_records: int | None = None, *, components=COMPONENTS
     metrics = {}
     for plant in plants:
         metrics.update(plant_metrics(records[records.plant == plant], rbpf[plant],
-                                     ekf_first[plant], f"_{plant}", p["ekf_guesses"]))
+                                     ekf_first[plant], f"_{plant}", settings.ekf_guesses))
     mm = records[records.plant == "mismatch"].set_index("seed")
     if matched:
         ma = records[records.plant == "matched"].set_index("seed")

@@ -24,6 +24,7 @@ from railpaper.experiments.rbpf_parameter_estimation.mismatch import (
     run_mismatch,
 )
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralPart
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.settling import holds_from
 
 
@@ -39,7 +40,8 @@ def matched_rows(part: LateralPart, n_records: int) -> pd.DataFrame:
                                          START).all()) for r in runs]))
 
 
-def run_model_error(p: dict, part: LateralPart, progress=None) -> tuple[MismatchResult, dict]:
+def run_model_error(settings: Settings, part: LateralPart, progress=None
+                    ) -> tuple[MismatchResult, dict]:
     """The truth plant with model error on the first ``mismatch_records`` seeds
     (:func:`run_mismatch`, mismatch plant only), and the metrics of both plants.
 
@@ -54,12 +56,13 @@ def run_model_error(p: dict, part: LateralPart, progress=None) -> tuple[Mismatch
         ``rbpf_within_lost_mismatch`` / ``_gained_`` and ``ekf_converged_lost_mismatch`` /
         ``_gained_`` (records whose outcome flips from the linear plant to the truth plant).
     """
-    n = min(p["mismatch_records"], p["n_records"])
-    result = run_mismatch(p, n, matched=False, progress=progress)
+    n = min(settings.mismatch_records, settings.n_records)
+    result = run_mismatch(settings, n, matched=False, progress=progress)
     metrics = dict(result.metrics)
     matched = matched_rows(part, n)
     metrics.update(plant_metrics(matched, [r.rbpf_working_norm for r in part.runs[:n]],
-                                 list(part.runs[0].ekf_norm), "_matched", p["ekf_guesses"]))
+                                 list(part.runs[0].ekf_norm), "_matched",
+                                 settings.ekf_guesses))
     mm = result.records.set_index("seed")
     ma = matched.set_index("seed")
     for col, name in (("rbpf_all_within", "rbpf_within"), ("ekf_converged", "ekf_converged")):

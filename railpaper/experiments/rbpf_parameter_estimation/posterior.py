@@ -46,6 +46,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     PosteriorRun,
     ToyPart,
 )
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models import lateral_16state as L
 from railpaper.models.linear_toys import EQ18_G, Simulation
 from railpaper.settling import holds_from
@@ -58,48 +59,49 @@ MIN_MOVES = 1                      # moves per event: at least one, more until d
 
 
 # ----------------------------------------------------------------------------- one record
-def toy_box(p: dict, start: np.ndarray = toy.TOY_INITS[1]) -> tuple[np.ndarray, np.ndarray]:
+def toy_box(settings: Settings, start: np.ndarray = toy.TOY_INITS[1]
+            ) -> tuple[np.ndarray, np.ndarray]:
     """The RBPF's uniform prior box of the toy: ``start`` ± ``toy_prior_halfwidth`` (1)."""
-    hw = p["toy_prior_halfwidth"]
+    hw = settings.toy_prior_halfwidth
     return np.asarray(start, float) - hw, np.asarray(start, float) + hw
 
 
-def toy_posterior(p: dict, sim: Simulation, seed: int,
+def toy_posterior(settings: Settings, sim: Simulation, seed: int,
                   start: np.ndarray = toy.TOY_INITS[1]) -> PosteriorRun:
     """The exact posterior of x1..x4 after every step of one toy record (IBIS, generator
     ``[seed, 17]``) under the RBPF's prior box around ``start``, x0 = 0, P0 = I."""
-    lower, upper = toy_box(p, start)
-    run = run_ibis(toy.system(p), sim.y, lower, upper, np.zeros(2), np.eye(2),
+    lower, upper = toy_box(settings, start)
+    run = run_ibis(toy.system(settings), sim.y, lower, upper, np.zeros(2), np.eye(2),
                    np.random.default_rng([seed, SEED_KEY]), u=sim.u,
-                   n_particles=p["toy_ibis_particles"], proposal=PROPOSAL, min_moves=MIN_MOVES)
+                   n_particles=settings.toy_ibis_particles, proposal=PROPOSAL, min_moves=MIN_MOVES)
     return PosteriorRun.from_ibis(run)
 
 
-def lateral_posterior(p: dict, system, record: LateralRecord, theta: np.ndarray, seed: int
-                      ) -> PosteriorRun:
+def lateral_posterior(settings: Settings, system, record: LateralRecord, theta: np.ndarray,
+                      seed: int) -> PosteriorRun:
     """The exact posterior of θ after every step of one lateral record, divided by the true θ:
     IBIS (generator ``[seed, 17]``) on the filters' model ``system`` (from
-    :func:`~railpaper.experiments.rbpf_parameter_estimation.experiment.filter_system`) with the RBPF's
+    :func:`~railpaper.experiments.rbpf_parameter_estimation.lateral.record_system`) with the RBPF's
     box θ × [``prior_low``, ``prior_high``] and state prior x0 = 0, P0 = 1e-10 I."""
-    run = run_ibis(system, record.y, p["prior_low"] * theta, p["prior_high"] * theta,
+    run = run_ibis(system, record.y, settings.prior_low * theta, settings.prior_high * theta,
                    np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
                    np.random.default_rng([seed, SEED_KEY]), u=record.u_mps,
-                   n_particles=p["ibis_particles"], proposal=PROPOSAL, min_moves=MIN_MOVES)
+                   n_particles=settings.ibis_particles, proposal=PROPOSAL, min_moves=MIN_MOVES)
     return PosteriorRun.from_ibis(run, theta)
 
 
 # ----------------------------------------------------------------------------- toy, every record
-def toy_posteriors(p: dict, part: ToyPart) -> ToyPart:
+def toy_posteriors(settings: Settings, part: ToyPart) -> ToyPart:
     """IBIS on the first ``toy_ibis_records`` toy records of ``part`` (records ``seed`` …,
     initial condition 1's box);
     returns ``part`` with :attr:`ToyPart.record`, :attr:`~ToyPart.posterior` (the illustrated
     record) and :attr:`~ToyPart.coverage` filled."""
     rows, first = [], None
     one = part.records[part.records.init == 1].set_index("seed")
-    for i in range(min(p["toy_ibis_records"], p["toy_seeds"])):
-        seed = p["seed"] + i
-        sim = toy.simulate(p, np.random.default_rng(seed))   # the record run_toy filtered
-        post = toy_posterior(p, sim, seed)
+    for i in range(min(settings.toy_ibis_records, settings.toy_seeds)):
+        seed = settings.seed + i
+        sim = toy.simulate(settings, np.random.default_rng(seed))   # the record run_toy filtered
+        post = toy_posterior(settings, sim, seed)
         covers = credible_interval_covers(post, part.truth)
         for j in range(4):
             rows.append(dict(seed=seed, parameter=f"x{j + 1}", truth=part.truth[j],
@@ -134,16 +136,17 @@ def toy_record_table(sim: Simulation) -> pd.DataFrame:
     return pd.DataFrame({"step": np.arange(1, len(sim.y) + 1), "u": sim.u[:, 0], "y": sim.y[:, 0]})
 
 
-def toy_posterior_json(p: dict, post: PosteriorRun) -> str:
+def toy_posterior_json(settings: Settings, post: PosteriorRun) -> str:
     """``toy_posterior.json``: the toy record's exact-posterior reference — the uniform prior
     box, the state prior before the first transition, the noise variances, and the posterior
     mean and sd of x1..x4 after the last step (IBIS)."""
-    lower, upper = toy_box(p)
+    lower, upper = toy_box(settings)
     doc = dict(model="Ding et al. (2014) Eq. (18): X(n) = [[0, 1.5], [x1, x2]] X(n-1) + "
                "[x3, x4]' u(n) + G W(n-1), y(n) = [1, 0] X(n) + V(n), G = "
                f"{EQ18_G[:, 0].tolist()}'; u(n) in column u of toy_record.csv",
                prior_lower=lower.tolist(), prior_upper=upper.tolist(), x0=[0.0, 0.0],
-               P0=np.eye(2).tolist(), w_var=p["toy_noise_var"], v_var=p["toy_noise_var"],
+               P0=np.eye(2).tolist(), w_var=settings.toy_noise_var,
+               v_var=settings.toy_noise_var,
                step=int(post.mean.shape[0]), mean=post.mean[-1].tolist(),
                sd=post.sd[-1].tolist(), sampler=f"IBIS, {post.particles} particles")
     return json.dumps(doc, indent=2) + "\n"

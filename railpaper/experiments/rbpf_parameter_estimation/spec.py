@@ -1,4 +1,5 @@
-"""The parameters of chapter ``rbpf-parameter-estimation`` (Ding et al. 2014): :data:`SPEC`.
+"""The parameters of chapter ``rbpf-parameter-estimation`` (Ding et al. 2014): :data:`SPEC` and
+its typed settings, :class:`Settings`.
 
 Kept apart from :mod:`railpaper.experiments.rbpf_parameter_estimation.experiment` (which re-exports it) so
 that the chapter's computation stays short; every name, default, quick value and unit is here.
@@ -32,7 +33,7 @@ SPEC = ChapterSpec(
         P("toy_steps", 500, "int", "measurements of each toy record", minimum=10),
         P("toy_particles", 300, "int", "RBPF particles (toy)", minimum=2),
         P("toy_seeds", 300, "int", "toy records (Monte Carlo samples of the toy's claims, < 1000)",
-          quick=40, minimum=1),
+          quick=40, minimum=1, changes_records=False),
         P("toy_prior_halfwidth", 2.0, "float",
           "RBPF prior: uniform on initial condition +- this, per parameter, 1", positive=True),
         P("toy_tempering_steps", 50, "int", "toy working-scheme RBPF: tempering steps",
@@ -64,16 +65,16 @@ SPEC = ChapterSpec(
           "fresh paired records, data/rbpf-parameter-estimation/ess_threshold_paired.csv; see "
           "the chapter), 1", positive=True),
         P("n_records", 30, "int", "lateral records (Monte Carlo samples, < 1000), each filtered "
-          "by both RBPF schemes and one EKF guess", quick=5, minimum=2),
+          "by both RBPF schemes and one EKF guess", quick=5, minimum=2, changes_records=False),
         P("paper_records", 110, "int", "lateral records (seeds seed … seed + paper_records - 1, "
           "< 1000) filtered by the paper-scheme RBPF, the sample of its two claims ('within 5 % "
           "after 350 steps', 'unbiased'); the first n_records of them are the records above, the "
           "rest get the paper scheme alone (fewer than n_records: n_records)", quick=5,
-          minimum=2),
+          minimum=2, changes_records=False),
         P("working_records", 70, "int", "lateral records (seeds seed … seed + working_records "
           "- 1, < 1000) filtered by our working-scheme RBPF, the sample of its rows; the first "
           "n_records of them are the records above, the rest get the working scheme alone "
-          "(fewer than n_records: n_records)", quick=5, minimum=2),
+          "(fewer than n_records: n_records)", quick=5, minimum=2, changes_records=False),
         P("ekf_guesses", 10, "int", "initial parameter guesses of the lateral EKF on the "
           "illustrated record (the others get one each)", minimum=1),
         P("ekf_steps", 500, "int", "steps of each lateral EKF run (<= n_steps)", minimum=10),
@@ -81,22 +82,24 @@ SPEC = ChapterSpec(
           "(prior box of initial condition 1)", minimum=10),
         P("toy_ibis_records", 90, "int", "toy records (the first ones, at most toy_seeds) on "
           "which IBIS computes the exact posterior; coverage and the EKF's offset are counted on "
-          "them", quick=40, minimum=1),
+          "them", quick=40, minimum=1, changes_records=False),
         P("ibis_particles", 250, "int", "IBIS particles of the lateral exact posterior",
           quick=100, minimum=10),
         P("ibis_records", 30, "int", "lateral records (the first ones, at most n_records) on "
           "which IBIS computes the exact posterior; calibration is counted on them", quick=5,
-          minimum=1),
+          minimum=1, changes_records=False),
         P("mismatch_records", 20, "int", "records (the first seeds, at most n_records) of the "
           "truth plant with model error (saturating creep, nonlinear conicity, 40 Hz "
-          "low-pass), each filtered by the EKF and our tempered RBPF", quick=5, minimum=2),
+          "low-pass), each filtered by the EKF and our tempered RBPF", quick=5, minimum=2,
+          changes_records=False),
         P("measurements_csv", "", "str",
           "user CSV (t_s, acc_w1_mps2, acc_w2_mps2, acc_b_mps2, acc_bd_mps2, yawrate_b_radps"
           "[, ydot_t1_mps, ydot_t2_mps]) instead of simulated data; empty = simulate",
           path=True),
         P("lateral", True, "bool", "run Part 2, the lateral vehicle (sweep samples of the toy "
-          "alone switch it off; the notebook needs it)"),
+          "alone switch it off; the notebook needs it)", changes_records=False),
     ],
 )
+Settings = SPEC.settings_type
 
-__all__ = ["SPEC"]
+__all__ = ["SPEC", "Settings"]

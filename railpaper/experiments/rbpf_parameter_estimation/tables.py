@@ -8,6 +8,7 @@ import pandas as pd
 
 from railpaper.experiments.display import markdown, number
 from railpaper.experiments.rbpf_parameter_estimation.result import steps_reported
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models.lateral_16state import PARAM_NAMES
 
 #: Display names of the five lateral parameters (LaTeX, for Markdown tables and plot labels).
@@ -126,21 +127,21 @@ def final_estimates_markdown(estimates: dict[str, np.ndarray], labels: list[str]
     return markdown(pd.DataFrame(rows, columns=[corner, *labels, head]))
 
 
-def caption_values(result, params: dict) -> dict[str, str]:
+def caption_values(result, settings: Settings) -> dict[str, str]:
     """Numbers of this run for the captions and the text (Markdown strings, glued by name)."""
     toy, lat, m = result.toy, result.lateral, result.metrics
-    out = {"seed": str(params["seed"]), "toy_records": str(params["toy_seeds"]),
-           "toy_ibis_records": str(min(params["toy_ibis_records"], params["toy_seeds"])),
+    out = {"seed": str(settings.seed), "toy_records": str(settings.toy_seeds),
+           "toy_ibis_records": str(min(settings.toy_ibis_records, settings.toy_seeds)),
            "toy_steps": str(toy.steps), "toy_never": str(toy.steps + 1),
-           "toy_tol": number(params["toy_bias_tol"]),
-           "speed": f"{number(params['speed_kmh'])} km/h",
-           "prior_box": f"{number(params['prior_low'])}–{number(params['prior_high'])}"}
+           "toy_tol": number(settings.toy_bias_tol),
+           "speed": f"{number(settings.speed_kmh)} km/h",
+           "prior_box": f"{number(settings.prior_low)}–{number(settings.prior_high)}"}
     one = toy.records[toy.records.seed == toy.seed].set_index("init")
     for ic in (1, 2):
         out[f"toy_err_paper_{ic}"] = number(one.rbpf_err_max[ic], 3)
         out[f"toy_err_ekf_{ic}"] = number(one.ekf_err_max[ic], 3)
     if lat is None:
-        return out | posterior_caption_values(result, params)
+        return out | posterior_caption_values(result, settings)
     hunting = {k: m[f"critical_speed_kmh_{k}"] for k in ("chosen", "all_halved",
                                                             "wheelset_bogie_doubled")}
     for key, v in hunting.items():
@@ -163,7 +164,7 @@ def caption_values(result, params: dict) -> dict[str, str]:
         out["crlb_worst"] = f"{number(100 * worst.max(), 2)} %"
         out["crlb_worst_name"] = PARAM_WORDS[worst.idxmax()]
         out["ekf_count"] = f"{lat.ekf_converged_count} of {len(lat.illustrated.ekf_norm)}"
-    return out | posterior_caption_values(result, params)
+    return out | posterior_caption_values(result, settings)
 
 
 def text_markdown(frame: pd.DataFrame) -> str:
@@ -384,13 +385,13 @@ def what_works_markdown(m: dict) -> str:
     return "\n".join(f"* {item}" for item in items) + "\n"
 
 
-def posterior_caption_values(result, params: dict) -> dict[str, str]:
+def posterior_caption_values(result, settings: Settings) -> dict[str, str]:
     """Numbers of this run for the exact-posterior, calibration and model-error sections (every
     name always present: "—" or a sentence where this run has no such number)."""
     m, toy, lat = result.metrics, result.toy, result.lateral
     user = "this run filtered a record of the user's, without a truth to compare with"
-    out = {"toy_ibis_particles": str(params["toy_ibis_particles"]),
-           "toy_last_step": str(toy.steps), "ibis_particles": str(params["ibis_particles"]),
+    out = {"toy_ibis_particles": str(settings.toy_ibis_particles),
+           "toy_last_step": str(toy.steps), "ibis_particles": str(settings.ibis_particles),
            "ibis_records": "—", "lat_last_step": "—", "attainable": f"Not judged: {user}.",
            "what_works": f"Not judged: {user}.\n", "model_error": f"No truth plant: {user}.",
            "mismatch_records": "—", "ekf_of_guesses_linear": "—",

@@ -15,6 +15,7 @@ import pandas as pd
 from railpaper.engine.rbpf import FilterRun, run_rbpf
 from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
+from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
 from railpaper.settling import settling_step
 
@@ -29,68 +30,70 @@ def gaussian_covers(mean: np.ndarray, sd: np.ndarray, truth: np.ndarray) -> np.n
     return np.abs(np.asarray(truth) - np.asarray(mean)) <= Z90 * np.asarray(sd)
 
 
-def truth(p: dict) -> np.ndarray:
+def truth(settings: Settings) -> np.ndarray:
     """The true (x1, x2, x3, x4) of Eq. (18) from the parameters ``toy_x1`` … ``toy_x4``."""
-    return np.array([p["toy_x1"], p["toy_x2"], p["toy_x3"], p["toy_x4"]])
+    return np.array([settings.toy_x1, settings.toy_x2, settings.toy_x3, settings.toy_x4])
 
 
-def system(p: dict):
+def system(settings: Settings):
     """``system(theta)``: Eq. (18) for a batch of parameter particles, W and V of variance
     ``toy_noise_var`` (:func:`railpaper.models.linear_toys.eq18_system`)."""
-    return eq18_system(p["toy_noise_var"], p["toy_noise_var"])
+    return eq18_system(settings.toy_noise_var, settings.toy_noise_var)
 
 
-def simulate(p: dict, rng: np.random.Generator) -> Simulation:
+def simulate(settings: Settings, rng: np.random.Generator) -> Simulation:
     """One record of ``toy_steps`` measurements at the true x: input u ~ N(0, 1), then the
     process and measurement noise, drawn from ``rng``."""
-    v = p["toy_noise_var"]
-    return simulate_eq18(truth(p), v, v, p["toy_steps"], rng)
+    v = settings.toy_noise_var
+    return simulate_eq18(truth(settings), v, v, settings.toy_steps, rng)
 
 
-def prior(p: dict, start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def prior(settings: Settings, start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """``toy_particles`` particles (N, 4) uniform on ``start`` ± ``toy_prior_halfwidth``."""
-    hw = p["toy_prior_halfwidth"]
-    return rng.uniform(start - hw, start + hw, (p["toy_particles"], 4))
+    hw = settings.toy_prior_halfwidth
+    return rng.uniform(start - hw, start + hw, (settings.toy_particles, 4))
 
 
-def rbpf(p: dict, model, sim: Simulation, theta0: np.ndarray, rng: np.random.Generator,
+def rbpf(settings: Settings, model, sim: Simulation, theta0: np.ndarray, rng: np.random.Generator,
          scheme: str) -> FilterRun:
     """The RBPF of ``model`` (from :func:`system`) from particles ``theta0`` on one record:
     ``scheme="paper"`` (Steps 1–2.6: resample and move every step, Liu–West δ =
     ``paper_delta``) or ``"working"`` (ours: tempering over ``toy_tempering_steps``, resampling
     when ESS < ``toy_ess_fraction`` N, δ = ``working_delta``).  Each particle's Kalman filter starts
     at x = 0 with covariance I."""
-    options = (dict(scheme="paper", delta=p["paper_delta"]) if scheme == "paper" else
-               dict(scheme="working", delta=p["working_delta"], ess_fraction=p["toy_ess_fraction"],
-                    tempering_steps=p["toy_tempering_steps"]))
+    options = (dict(scheme="paper", delta=settings.paper_delta) if scheme == "paper" else
+               dict(scheme="working", delta=settings.working_delta,
+                    ess_fraction=settings.toy_ess_fraction,
+                    tempering_steps=settings.toy_tempering_steps))
     return run_rbpf(model, sim.y, theta0, np.zeros(2), np.eye(2), rng, u=sim.u, **options)
 
 
-def ekf(p: dict, sim: Simulation, start: np.ndarray) -> EKFRun:
+def ekf(settings: Settings, sim: Simulation, start: np.ndarray) -> EKFRun:
     """The augmented-state EKF on one record from x = ``start`` (P_θ = I, x0 = 0 with P = I,
     random walk of variance ``toy_ekf_q_theta`` per step on each x_j)."""
-    v = p["toy_noise_var"]
+    v = settings.toy_noise_var
     Q, R = v * EQ18_G @ EQ18_G.T, np.array([[v]])
     return run_augmented_ekf(eq18_model, sim.y, start, np.zeros(2), np.eye(2), 1.0, Q, R,
-                             p["toy_ekf_q_theta"], u=sim.u, divergence_bound=EKF_BOUND)
+                             settings.toy_ekf_q_theta, u=sim.u, divergence_bound=EKF_BOUND)
 
 
-def filter_record(p: dict, sim: Simulation, ic: int, rng: np.random.Generator) -> ToyRun:
+def filter_record(settings: Settings, sim: Simulation, ic: int, rng: np.random.Generator
+                  ) -> ToyRun:
     """Prior draw, both RBPF schemes (same particles) and the EKF from initial condition ``ic``."""
-    start, model = TOY_INITS[ic], system(p)
-    theta0 = prior(p, start, rng)
-    paper = rbpf(p, model, sim, theta0, rng, "paper")
-    working = rbpf(p, model, sim, theta0, rng, "working")
-    ek = ekf(p, sim, start)
+    start, model = TOY_INITS[ic], system(settings)
+    theta0 = prior(settings, start, rng)
+    paper = rbpf(settings, model, sim, theta0, rng, "paper")
+    working = rbpf(settings, model, sim, theta0, rng, "working")
+    ek = ekf(settings, sim, start)
     return ToyRun(ic, start, paper.theta_mean, working.theta_mean, ek.theta, ek.diverged,
                   ek.diverged_step, paper.theta_std, working.theta_std)
 
 
-def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
+def _record_stats(settings: Settings, seed: int, run: ToyRun) -> dict:
     """One row of :attr:`ToyPart.records`: final errors, converged flags and settle steps, and
     the signed final errors θ̂_j − x_j of the EKF (NaN after a numerical divergence) and of the
     paper-scheme RBPF (``ekf_final_error_x<j>``, ``rbpf_final_error_x<j>``)."""
-    x, tol = truth(p), p["toy_bias_tol"]
+    x, tol = truth(settings), settings.toy_bias_tol
 
     def err(theta):                                       # max |error| over x_j per step
         e = np.nan_to_num(np.abs(theta - x).max(axis=1), nan=EKF_BOUND)
@@ -117,18 +120,18 @@ def _record_stats(p: dict, seed: int, run: ToyRun) -> dict:
                 **signed)
 
 
-def run_toy(p: dict) -> ToyPart:
+def run_toy(settings: Settings) -> ToyPart:
     """Eq. (18) on records ``seed`` … ``seed + toy_seeds − 1``: record i is
     :func:`simulate` then :func:`filter_record` from initial conditions 1 and 2, all on
     ``numpy.random.default_rng(seed + i)``."""
     stats, illustrated = [], {}
-    for i in range(p["toy_seeds"]):
-        rng = np.random.default_rng(p["seed"] + i)
-        sim = simulate(p, rng)
+    for i in range(settings.toy_seeds):
+        rng = np.random.default_rng(settings.seed + i)
+        sim = simulate(settings, rng)
         for ic in TOY_INITS:
-            run = filter_record(p, sim, ic, rng)
-            stats.append(_record_stats(p, p["seed"] + i, run))
+            run = filter_record(settings, sim, ic, rng)
+            stats.append(_record_stats(settings, settings.seed + i, run))
             if i == 0:
                 illustrated[ic] = run
-    return ToyPart(truth=truth(p), steps=p["toy_steps"], seed=p["seed"], illustrated=illustrated,
-                   records=pd.DataFrame(stats))
+    return ToyPart(truth=truth(settings), steps=settings.toy_steps, seed=settings.seed,
+                   illustrated=illustrated, records=pd.DataFrame(stats))

@@ -10,6 +10,7 @@ from conftest import railpaper_cli
 from railpaper.data import read_toml
 from railpaper.engine.rbpf import run_rbpf
 from railpaper.experiments.base import ParameterError, check_metrics
+from railpaper.experiments.lateral_vehicle import RecordSettings, prior_centre
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation import measurements
@@ -32,10 +33,10 @@ def quick_result():
     """run() in this process at quick sizes with fewer records (the quick book's papermill run
     at the full quick sizes is what the tolerance test reads); paper_records > n_records, so
     records filtered by the paper scheme alone, and by the working scheme alone, are in it."""
-    params = chapter.SPEC.resolve({"toy_seeds": 6, "n_records": 3, "ibis_records": 2,
-                                   "mismatch_records": 2, "working_records": 4}, quick=True)
-    assert params["paper_records"] > params["working_records"] > params["n_records"]
-    return params, chapter.run(quick=True, **params)
+    settings = chapter.SPEC.resolve({"toy_seeds": 6, "n_records": 3, "ibis_records": 2,
+                                     "mismatch_records": 2, "working_records": 4}, quick=True)
+    assert settings.paper_records > settings.working_records > settings.n_records
+    return settings, chapter.run(settings)
 
 
 def test_quick_book_run_is_within_tolerances(quick_chapter_dir):
@@ -48,7 +49,7 @@ def test_quick_book_run_is_within_tolerances(quick_chapter_dir):
 
 
 def test_quick_run_has_every_key(quick_result):
-    params, result = quick_result
+    settings, result = quick_result
     metrics = check_metrics(result.metrics)
     for key in REQUIRED:
         assert key in metrics, key
@@ -57,19 +58,19 @@ def test_quick_run_has_every_key(quick_result):
         for name in ([] if is_untestable(row) else rule_metrics(row)):
             assert name in metrics, (key, name)
     assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
-    assert metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"] == params["paper_records"]
+    assert metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"] == settings.paper_records
     ts = result.timeseries
     assert list(ts.columns[:6]) == ["t_s"] + [f"{p}_norm" for p in PARAMS]
-    assert len(ts) == params["n_steps"] and math.isclose(ts.t_s.iloc[0], params["dt_s"])
+    assert len(ts) == settings.n_steps and math.isclose(ts.t_s.iloc[0], settings.dt_s)
     toy = result.extra_tables["toy_timeseries"]
-    assert toy.columns[0] == "step" and len(toy) == params["toy_steps"]
+    assert toy.columns[0] == "step" and len(toy) == settings.toy_steps
 
 
 def test_toy_only_sample_is_one_record_of_the_main_run(quick_result):
     """A toy sample (toy_seeds=1, lateral=False, seed s) is record s of the main run."""
-    params, result = quick_result
-    seed = params["seed"] + 3
-    sample = chapter.run(quick=True, **dict(params, seed=seed, toy_seeds=1, lateral=False))
+    settings, result = quick_result
+    seed = settings.seed + 3
+    sample = chapter.run(settings.replace(seed=seed, toy_seeds=1, lateral=False))
     assert sample.timeseries is None
     assert not any(k.startswith(("critical_speed", "steps_to_within", "crlb", "ekf_lateral",
                                  "lateral_")) for k in sample.metrics)
@@ -87,20 +88,20 @@ def test_toy_only_sample_is_one_record_of_the_main_run(quick_result):
 def test_monte_carlo_records_are_consecutive_seeds(quick_result):
     """Records seed, seed + 1, ... (so seed batches k * 1000 are disjoint), each filtered from
     both initial conditions; the lateral evidence counts n_records records."""
-    params, result = quick_result
+    settings, result = quick_result
     stats = result.toy.records
-    seeds = list(range(params["seed"], params["seed"] + params["toy_seeds"]))
+    seeds = list(range(settings.seed, settings.seed + settings.toy_seeds))
     assert sorted(stats[stats.init == 1].seed) == seeds == sorted(stats[stats.init == 2].seed)
     assert [run.seed for run in result.lateral.runs] == list(
-        range(params["seed"], params["seed"] + params["n_records"]))
-    assert len(result.lateral.runs) == params["n_records"]
-    assert len(result.lateral.paper_only_norm) == params["paper_records"] - params["n_records"]
-    assert len(result.lateral.working_only_norm) == params["working_records"] - params["n_records"]
-    assert result.metrics["lateral_ekf_converge_rate_n"] == params["n_records"]
+        range(settings.seed, settings.seed + settings.n_records))
+    assert len(result.lateral.runs) == settings.n_records
+    assert len(result.lateral.paper_only_norm) == settings.paper_records - settings.n_records
+    assert len(result.lateral.working_only_norm) == settings.working_records - settings.n_records
+    assert result.metrics["lateral_ekf_converge_rate_n"] == settings.n_records
     assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
     for name in ("toy_seeds", "n_records", "paper_records", "working_records"):
         with pytest.raises(ParameterError, match="< 1000"):
-            chapter.run(quick=True, **chapter.SPEC.resolve({name: 1000}, quick=True))
+            chapter.run(chapter.SPEC.resolve({name: 1000}, quick=True))
 
 
 def test_notebook_refuses_toy_only_run(tmp_path):
@@ -119,27 +120,27 @@ def test_steps_to_within():
 
 
 def test_non_physical_parameters_raise_one_line():
-    params = chapter.SPEC.resolve({"prior_low": 1.1}, quick=True)
+    settings = chapter.SPEC.resolve({"prior_low": 1.1}, quick=True)
     with pytest.raises(ParameterError, match="prior_low"):
-        chapter.run(quick=True, **params)
-    params = chapter.SPEC.resolve({"spectrum": "nope"}, quick=True)
+        chapter.run(settings)
+    settings = chapter.SPEC.resolve({"spectrum": "nope"}, quick=True)
     with pytest.raises(ParameterError, match="spectrum"):
-        chapter.run(quick=True, **params)
+        chapter.run(settings)
 
 
 def test_measurements_csv_validation(tmp_path):
-    params = chapter.SPEC.resolve({}, quick=True)
+    settings = chapter.SPEC.resolve({}, quick=True)
     bad = tmp_path / "bad.csv"
     pd.DataFrame({"t_s": np.arange(20) * 1e-3, "acc_w1_mps2": 0.0}).to_csv(bad, index=False)
     with pytest.raises(ParameterError, match="missing column"):
-        measurements.read_measurements(str(bad), params)
+        measurements.read_measurements(str(bad), settings.dt_s)
     good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in L.CHANNELS}})
     good.to_csv(tmp_path / "step.csv", index=False)
     with pytest.raises(ParameterError, match="dt_s"):
-        measurements.read_measurements(str(tmp_path / "step.csv"), params)
+        measurements.read_measurements(str(tmp_path / "step.csv"), settings.dt_s)
     good["t_s"] = np.arange(20) * 1e-3
     good.to_csv(tmp_path / "ok.csv", index=False)
-    rec = measurements.read_measurements(str(tmp_path / "ok.csv"), params)
+    rec = measurements.read_measurements(str(tmp_path / "ok.csv"), settings.dt_s)
     assert rec.y.shape == (20, 5) and rec.u_mps is None and rec.seed is None
 
 
@@ -167,9 +168,9 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
     guesses per record, and the illustrated record filtered by hand with the estimator."""
     from railpaper.threads import one_thread
 
-    params, result = quick_result
+    settings, result = quick_result
     lat, m = result.lateral, result.metrics
-    assert lat.stack("rbpf_paper_norm").shape == (params["n_records"], params["n_steps"], 5)
+    assert lat.stack("rbpf_paper_norm").shape == (settings.n_records, settings.n_steps, 5)
     np.testing.assert_array_equal(result.timeseries.t_s, lat.t_s)
     for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
         norm = getattr(lat.illustrated, field)
@@ -179,7 +180,7 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
             assert m[f"steps_to_within_5pct_{name}{suffix}"] == _steps_by_loop(norm[:, j])
             assert m[f"final_relative_error_{name}{suffix}"] == norm[-1, j] - 1
     ekf = lat.illustrated.ekf_norm
-    assert len(ekf) == params["ekf_guesses"] and all(len(r.ekf_norm) == 1 for r in lat.runs[1:])
+    assert len(ekf) == settings.ekf_guesses and all(len(r.ekf_norm) == 1 for r in lat.runs[1:])
     within = [bool(np.all(np.abs(r[-1] - 1) <= 0.05)) for r in ekf]
     assert lat.ekf_converged_count == sum(within) == m["ekf_lateral_converged_count"]
     assert list(lat.crlb.parameter) == list(PARAMS)
@@ -187,26 +188,27 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
     fixed, theta = study.vehicle()
     np.testing.assert_array_equal(lat.theta_true, theta)
     with one_thread():                                  # the run's thread settings
-        record = study.simulate_lateral(params, fixed, theta, params["seed"])
-        Q, R = study.filter_noise(fixed, theta, params, record.du_var_m2ps2)
-        rng = np.random.default_rng([params["seed"], 11])   # documented: prior, then the filter
-        theta0 = theta * rng.uniform(params["prior_low"], params["prior_high"], (200, 5))
-        run = run_rbpf(L.lateral_system(fixed, params["speed_kmh"] / 3.6, params["dt_s"], Q, R),
+        record = study.simulate_lateral(RecordSettings.of(settings), fixed, theta, settings.seed)
+        Q, R = study.filter_noise(fixed, theta, RecordSettings.of(settings),
+                                  record.du_var_m2ps2)
+        rng = np.random.default_rng([settings.seed, 11])   # documented: prior, then the filter
+        theta0 = theta * rng.uniform(settings.prior_low, settings.prior_high, (200, 5))
+        run = run_rbpf(L.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s, Q, R),
                        record.y, theta0, np.zeros(16), 1e-10 * np.eye(16), rng, u=record.u_mps,
-                       scheme="paper", delta=params["paper_delta"])
+                       scheme="paper", delta=settings.paper_delta)
     np.testing.assert_array_equal(run.theta_mean / theta, lat.illustrated.rbpf_paper_norm)
 
 
 def test_user_record_input_is_held_one_step(tmp_path):
     """u_k is the track velocity of row k − 1 (row 0 repeated); the process noise is the
     variance of its changes (numpy by hand)."""
-    params = chapter.SPEC.resolve({}, quick=True)
+    settings = chapter.SPEC.resolve({}, quick=True)
     t = np.arange(30) * 1e-3
     u1, u2 = np.sin(40 * t), np.cos(25 * t)
     frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in L.CHANNELS}, "ydot_t1_mps": u1,
                           "ydot_t2_mps": u2})
     frame.to_csv(tmp_path / "u.csv", index=False)
-    rec = measurements.read_measurements(str(tmp_path / "u.csv"), params)
+    rec = measurements.read_measurements(str(tmp_path / "u.csv"), settings.dt_s)
     np.testing.assert_array_equal(rec.u_mps[1:], np.column_stack([u1, u2])[:-1])
     np.testing.assert_array_equal(rec.u_mps[0], [u1[0], u2[0]])
     np.testing.assert_allclose(rec.du_var_m2ps2, [np.var(np.diff(u1)), np.var(np.diff(u2))],
@@ -269,27 +271,29 @@ def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_r
     from railpaper.engine.ibis import run_ibis
     from railpaper.threads import one_thread
 
-    params, result = quick_result
+    settings, result = quick_result
     lat = result.lateral
     fixed, theta = study.vehicle()
     with one_thread():
-        record = study.simulate_lateral(params, fixed, theta, params["seed"])
-        system = study.filter_system(params, fixed, theta, record)
-        run = run_ibis(system, record.y, params["prior_low"] * theta,
-                       params["prior_high"] * theta, np.zeros(16), 1e-10 * np.eye(16),
-                       np.random.default_rng([params["seed"], 17]), u=record.u_mps,
-                       n_particles=params["ibis_particles"], proposal="independent", min_moves=1)
-        paper = study.lateral_rbpf(params, system, record, theta, params["seed"], "paper")
+        record = study.simulate_lateral(RecordSettings.of(settings), fixed, theta, settings.seed)
+        system = study.filter_system(RecordSettings.of(settings), fixed, theta, record,
+                                     theta_ref=prior_centre(theta, settings.prior_low,
+                                                            settings.prior_high))
+        run = run_ibis(system, record.y, settings.prior_low * theta,
+                       settings.prior_high * theta, np.zeros(16), 1e-10 * np.eye(16),
+                       np.random.default_rng([settings.seed, 17]), u=record.u_mps,
+                       n_particles=settings.ibis_particles, proposal="independent", min_moves=1)
+        paper = study.lateral_rbpf(settings, system, record, theta, settings.seed, "paper")
     post = lat.illustrated.posterior
     np.testing.assert_array_equal(post.mean, run.mean / theta)
     np.testing.assert_array_equal(post.q95, run.q95 / theta)
     np.testing.assert_array_equal(lat.illustrated.rbpf_paper_sd_norm, paper.theta_std / theta)
     crlb = lat.crlb.set_index("parameter")
-    for k, col in ((350, "known_350"), (params["n_steps"], f"known_{params['n_steps']}")):
+    for k, col in ((350, "known_350"), (settings.n_steps, f"known_{settings.n_steps}")):
         ratio = post.sd[k - 1] / crlb[col].to_numpy()
         assert np.all((ratio > 0.7) & (ratio < 1.4)), (k, ratio)
-    assert sum(r.posterior is not None for r in lat.runs) == min(params["ibis_records"],
-                                                                 params["n_records"])
+    assert sum(r.posterior is not None for r in lat.runs) == min(settings.ibis_records,
+                                                                 settings.n_records)
 
 
 def test_lateral_posterior_metrics_count_by_hand(quick_result):
@@ -297,7 +301,7 @@ def test_lateral_posterior_metrics_count_by_hand(quick_result):
     the typed result, with scipy's exact binomial interval."""
     from scipy.stats import binomtest
 
-    params, result = quick_result
+    settings, result = quick_result
     m, runs = result.metrics, [r for r in result.lateral.runs if r.posterior is not None]
     z = 1.6448536269514722
     counts = {"working": 0, "paper_scheme": 0, "tempered": 0}
@@ -334,20 +338,20 @@ def test_each_scheme_runs_on_its_records_and_its_metrics_read_all_of_them(quick_
     from railpaper.settling import holds_from
     from railpaper.threads import one_thread
 
-    params, result = quick_result
+    settings, result = quick_result
     part, m = result.lateral, result.metrics
     alone_norm = getattr(part, f"{scheme}_only_norm")
-    n_total = params[f"{scheme}_records"]
-    extra = n_total - params["n_records"]
-    assert extra > 0 and alone_norm.shape == (extra, params["n_steps"], 5)
+    n_total = {"paper": settings.paper_records, "working": settings.working_records}[scheme]
+    extra = n_total - settings.n_records
+    assert extra > 0 and alone_norm.shape == (extra, settings.n_steps, 5)
     fixed, theta = study.vehicle()
-    seed = params["seed"] + n_total - 1                                 # the last one
+    seed = settings.seed + n_total - 1                                 # the last one
     with one_thread():
-        record = study.lateral_record(params, fixed, theta, seed)
-        alone = study.run_lateral_rbpf(params, fixed, theta, record, seed, scheme)
+        record = study.lateral_record(settings, fixed, theta, seed)
+        alone = study.run_lateral_rbpf(settings, fixed, theta, record, seed, scheme)
     np.testing.assert_array_equal(alone_norm[-1], alone)
     everyone = getattr(part, f"{scheme}_scheme_norm")()
-    np.testing.assert_array_equal(everyone[:params["n_records"]],
+    np.testing.assert_array_equal(everyone[:settings.n_records],
                                   part.stack(f"rbpf_{scheme}_norm"))
     hand = sum(bool(holds_from(np.abs(r - 1.0) <= 0.05, 350).all()) for r in everyone)
     assert m[f"lateral_within_5pct_from_350_rate_{scheme}_scheme_n"] == n_total

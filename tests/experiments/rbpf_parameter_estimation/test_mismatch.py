@@ -12,13 +12,15 @@ from scipy import signal, stats
 
 from railpaper import sensors
 from railpaper.data import load_quantities
+from railpaper.experiments.lateral_vehicle import RecordSettings
 from railpaper.experiments.rbpf_parameter_estimation import experiment as C
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation import mismatch as M
 from railpaper.paths import DATA_DIR
 
-P = {q.name: q.default for q in C.SPEC.parameters}
-SMALL = dict(P, n_steps=350, truth_substeps=4, n_particles=20, ekf_guesses=2, ekf_steps=40)
+SMALL = C.SPEC.resolve(dict(n_steps=400, truth_substeps=4, n_particles=20, ekf_guesses=2,
+                            ekf_steps=40))
+RECORD = RecordSettings.of(SMALL)
 
 
 @pytest.mark.parametrize("order", [1, 2, 3, 4, 5])
@@ -63,28 +65,28 @@ def test_linear_truth_record_is_the_chapter_record():
     fixed, theta = study.vehicle()
     st = M.mismatch_settings(components=())
     rec, diag = M.simulate_mismatch(SMALL, fixed, theta, 4, st)
-    ref = study.simulate_lateral(SMALL, fixed, theta, 4)
+    ref = study.simulate_lateral(RECORD, fixed, theta, 4)
     np.testing.assert_array_equal(rec.u_mps, ref.u_mps)               # same track input
     np.testing.assert_array_equal(rec.du_var_m2ps2, ref.du_var_m2ps2)
     np.testing.assert_array_equal(rec.u_var_m2ps2, ref.u_var_m2ps2)
     # same noise draws, and RK4 vs exact ZOH: differences far below the noise
-    assert np.max(np.abs(rec.y - ref.y) / study.noise_std(SMALL)) < 1e-6
+    assert np.max(np.abs(rec.y - ref.y) / study.noise_std(RECORD)) < 1e-6
     assert max(v for k, v in diag.items() if k.startswith("model_error_")) < 1e-6
     assert diag["saturation_max"] == 0.0 and diag["conicity_ratio"] == 1.0
 
 
 def test_paper_chain_is_a_butterworth_on_the_acquired_data():
     fixed, theta = study.vehicle()
-    ref = study.simulate_lateral(SMALL, fixed, theta, 2)
-    sos = signal.butter(2, 40.0, fs=1 / SMALL["dt_s"], output="sos")
+    ref = study.simulate_lateral(RECORD, fixed, theta, 2)
+    sos = signal.butter(2, 40.0, fs=1 / SMALL.dt_s, output="sos")
     rec, _ = M.simulate_mismatch(SMALL, fixed, theta, 2, M.mismatch_settings(
         components=("lowpass",), chain="paper"))
     expected = signal.sosfilt(sos, ref.y, axis=0)
-    assert np.max(np.abs(rec.y - expected) / study.noise_std(SMALL)) < 1e-6
+    assert np.max(np.abs(rec.y - expected) / study.noise_std(RECORD)) < 1e-6
     rec, _ = M.simulate_mismatch(SMALL, fixed, theta, 2, M.mismatch_settings(
         components=("lowpass",), chain="paper_zero_phase"))
     expected = signal.sosfiltfilt(sos, ref.y, axis=0)
-    assert np.max(np.abs(rec.y - expected) / study.noise_std(SMALL)) < 1e-6
+    assert np.max(np.abs(rec.y - expected) / study.noise_std(RECORD)) < 1e-6
 
 
 def test_run_mismatch_metrics_from_records():
@@ -101,7 +103,7 @@ def test_run_mismatch_metrics_from_records():
             assert m[f"{name}_{plant}_low"] == pytest.approx(ci.low, abs=1e-12)
             assert m[f"{name}_{plant}_high"] == pytest.approx(ci.high, abs=1e-12)
         first = res.ekf_first[plant]
-        assert len(first) == SMALL["ekf_guesses"]
+        assert len(first) == SMALL.ekf_guesses
         assert m[f"ekf_lateral_converged_count_{plant}"] == sum(
             bool(np.all(np.abs(e[-1] - 1) <= 0.05)) for e in first)
         norm = res.rbpf[plant]

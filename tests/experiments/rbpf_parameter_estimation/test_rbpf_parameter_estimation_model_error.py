@@ -9,21 +9,21 @@ from railpaper.experiments.rbpf_parameter_estimation.mismatch import run_mismatc
 
 
 def test_matched_metrics_from_part_two_equal_run_mismatch():
-    params = chapter.SPEC.resolve({"toy_seeds": 1, "n_records": 2, "ibis_records": 1,
-                                   "mismatch_records": 2, "ekf_guesses": 2}, quick=True)
-    result = chapter.run(quick=True, **params)
+    settings = chapter.SPEC.resolve({"toy_seeds": 1, "n_records": 2, "ibis_records": 1,
+                                     "mismatch_records": 2, "ekf_guesses": 2}, quick=True)
+    result = chapter.run(settings)
     m = result.metrics
-    direct = run_mismatch(params, 2, matched=True)          # filters the matched plant itself
+    direct = run_mismatch(settings, 2, matched=True)          # filters the matched plant itself
     for key, value in direct.metrics.items():
         assert key in m, key
         assert m[key] == value or (np.isnan(value) and np.isnan(m[key])), (key, m[key], value)
     rows = direct.records.set_index(["plant", "seed"])
     for r in result.lateral.runs:                           # Part 2's record = the matched one
-        np.testing.assert_array_equal(direct.rbpf["matched"][r.seed - params["seed"]],
+        np.testing.assert_array_equal(direct.rbpf["matched"][r.seed - settings.seed],
                                       r.rbpf_working_norm)
         assert rows.loc[("matched", r.seed), "ekf_converged"] == study.ekf_converged(
             r.ekf_norm[0])
     lost = sum(rows.loc[("matched", s), "rbpf_all_within"]
                and not rows.loc[("mismatch", s), "rbpf_all_within"] for s in (0, 1))
     assert m["rbpf_within_lost_mismatch"] == lost
-    assert result.mismatch.ekf_first["mismatch"][0].shape == (params["ekf_steps"], 5)
+    assert result.mismatch.ekf_first["mismatch"][0].shape == (settings.ekf_steps, 5)

@@ -26,13 +26,13 @@ def toy_files(tmp_path_factory):
     pipeline writes it."""
     before = numba.get_num_threads()
     numba.set_num_threads(1)
-    params = chapter.SPEC.resolve({"toy_seeds": 3, "toy_ibis_records": 2, "lateral": False},
-                                  quick=True)
-    result = chapter.run(quick=True, **params)
+    settings = chapter.SPEC.resolve({"toy_seeds": 3, "toy_ibis_records": 2, "lateral": False},
+                                    quick=True)
+    result = chapter.run(settings)
     out = tmp_path_factory.mktemp("toy")
-    write_outputs(out, chapter.SPEC, params, True, result)
+    write_outputs(out, chapter.SPEC, settings, True, result)
     numba.set_num_threads(before)
-    return params, result, pd.read_csv(out / "toy_record.csv"), \
+    return settings, result, pd.read_csv(out / "toy_record.csv"), \
         json.loads((out / "toy_posterior.json").read_text())
 
 
@@ -40,15 +40,15 @@ def test_toy_record_rows_follow_the_documented_convention(toy_files):
     """Row k holds u_k (the input of the transition into step k) and y_k: re-derived by a
     plain loop x_k = F x_(k-1) + B u_k + G w_(k-1), y_k = x_k[0] + e_k from the documented draws
     (generator ``seed``: u, then x_0 (zero covariance), then w, then e)."""
-    params, _, record, doc = toy_files
-    K, var = params["toy_steps"], params["toy_noise_var"]
+    settings, _, record, doc = toy_files
+    K, var = settings.toy_steps, settings.toy_noise_var
     assert list(record.columns) == ["step", "u", "y"]
     np.testing.assert_array_equal(record.step, np.arange(1, K + 1))
-    rng = np.random.default_rng(params["seed"])
+    rng = np.random.default_rng(settings.seed)
     u = rng.standard_normal(K)
     rng.standard_normal(2)                                   # x_0 ~ N(0, 0): drawn, unused
     w, e = rng.standard_normal(K) * np.sqrt(var), rng.standard_normal(K) * np.sqrt(var)
-    x1, x2, x3, x4 = (params[f"toy_x{j}"] for j in range(1, 5))
+    x1, x2, x3, x4 = settings.toy_x1, settings.toy_x2, settings.toy_x3, settings.toy_x4
     F, B, x, y = np.array([[0.0, 1.5], [x1, x2]]), np.array([x3, x4]), np.zeros(2), []
     for k in range(K):
         x = F @ x + B * u[k] + G * w[k]
@@ -56,8 +56,8 @@ def test_toy_record_rows_follow_the_documented_convention(toy_files):
     np.testing.assert_allclose(record.u, u, rtol=0, atol=1e-15)
     np.testing.assert_allclose(record.y, y, rtol=1e-12, atol=1e-12)
     assert doc["step"] == K and doc["w_var"] == doc["v_var"] == var
-    np.testing.assert_array_equal(doc["prior_lower"], -params["toy_prior_halfwidth"] * np.ones(4))
-    np.testing.assert_array_equal(doc["prior_upper"], params["toy_prior_halfwidth"] * np.ones(4))
+    np.testing.assert_array_equal(doc["prior_lower"], -settings.toy_prior_halfwidth * np.ones(4))
+    np.testing.assert_array_equal(doc["prior_upper"], settings.toy_prior_halfwidth * np.ones(4))
     np.testing.assert_array_equal(doc["x0"], np.zeros(2))
     np.testing.assert_array_equal(doc["P0"], np.eye(2))
 
@@ -119,14 +119,14 @@ def test_toy_coverage_table_and_metrics_count_by_hand(toy_files):
     exact binomial interval."""
     from scipy.stats import binomtest
 
-    params, result, _, _ = toy_files
+    settings, result, _, _ = toy_files
     toy, m = result.toy, result.metrics
     cov = toy.coverage
     # the exact posterior (and so coverage and the EKF's offset) on the first toy_ibis_records
-    assert sorted(set(cov.seed)) == [params["seed"], params["seed"] + 1]
-    assert len(cov) == 4 * params["toy_ibis_records"] and params["toy_seeds"] == 3
+    assert sorted(set(cov.seed)) == [settings.seed, settings.seed + 1]
+    assert len(cov) == 4 * settings.toy_ibis_records and settings.toy_seeds == 3
     assert m.get("toy_ekf_max_abs_offset_init2_n", 0) <= 2
-    first = cov[cov.seed == params["seed"]]
+    first = cov[cov.seed == settings.seed]
     post, run = toy.posterior, toy.illustrated[1]
     for j, row in enumerate(first.itertuples()):
         assert row.posterior_covers == (post.q05[-1, j] <= toy.truth[j] <= post.q95[-1, j])

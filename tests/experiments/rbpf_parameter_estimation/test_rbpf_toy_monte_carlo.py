@@ -157,9 +157,9 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
     from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy
     from railpaper.models.linear_toys import EQ18_G, eq18_system, simulate_eq18
 
-    p = chapter.SPEC.resolve({"seed": 5, "toy_seeds": 2, "toy_steps": 60, "toy_particles": 30,
-                              "toy_tempering_steps": 10}, quick=True)
-    part = run_toy(p)
+    settings = chapter.SPEC.resolve({"seed": 5, "toy_seeds": 2, "toy_steps": 60,
+                                     "toy_particles": 30, "toy_tempering_steps": 10}, quick=True)
+    part = run_toy(settings)
     truth, v = np.array([-0.4, 0.5, 0.5, 1.0]), 0.1
     system = eq18_system(v, v)
     starts = {1: np.zeros(4), 2: np.array([-0.26, 1.0, 0.24, -0.5])}
