@@ -91,6 +91,17 @@ def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
                 pilots[d.study] = map_in_process(study, settings, range(
                     PILOT_SEED, PILOT_SEED + pilot_records))
             sigma = pilot_sigma(d, pilots[d.study])
+        if d.study:                    # a declared column the study does not compute: refuse
+            study = chapter_studies(chapter)[d.study] if d.study in chapter_studies(chapter) \
+                else None
+            if study is None:
+                raise PipelineError(f"{d.key}: chapter '{chapter}' has no study {d.study!r}")
+            columns = (pilots[d.study] if d.study in pilots
+                       else study.rows(settings, (PILOT_SEED,))).columns
+            absent = [m for m in d.metrics if m not in columns]
+            if absent:
+                raise PipelineError(f"{d.key}: study {d.study!r} has no column {absent[0]!r} at "
+                                    "the chapter's defaults")
         sizes[d.key] = registered_size(d, vocabulary, sigma)
     registry, revised = register(rows, vocabulary, load_registry(), sizes,
                                  date or datetime.date.today().isoformat())

@@ -287,8 +287,9 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
         if rows is None or len(rows) == 0:
             return Decision("undecided", f"no records of study {d.study!r}")
         missing = [m for m in d.metrics if m not in rows.columns]
-        if missing:
-            raise DataError(f"{d.key}: study {d.study!r} has no column {missing[0]!r}")
+        if missing:                    # e.g. a run at other speeds than the declaration reads
+            return Decision("undecided", f"this run's study {d.study!r} has no column "
+                            f"{missing[0]!r} (its settings do not compute it)", n=len(rows))
         if size is not None and len(rows) < size:
             return Decision("undecided", f"{len(rows)} records of the {size} registered for it "
                             "(sizes by power, before the deciding run)", n=len(rows))

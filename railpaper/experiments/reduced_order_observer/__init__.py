@@ -9,15 +9,7 @@ the whole computation, ``evidence`` and ``kalman`` hold its per-seed record stud
 reduce, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.reduced_order_observer.evidence import HERTZ, MONTE_CARLO
-from railpaper.experiments.reduced_order_observer.experiment import run, validate
-from railpaper.experiments.reduced_order_observer.kalman import (
-    ESTIMATOR_RECORDS,
-    TRACK_NOISE_RECORDS,
-)
+from railpaper.experiments.reduced_order_observer.experiment import STUDIES, run, validate
 from railpaper.experiments.reduced_order_observer.spec import SPEC, Settings
-
-#: The chapter's per-record studies (the evidence store and the decisive run compute them).
-STUDIES = (MONTE_CARLO, HERTZ, ESTIMATOR_RECORDS, TRACK_NOISE_RECORDS)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]

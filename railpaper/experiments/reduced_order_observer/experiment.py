@@ -47,6 +47,11 @@ from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTI
 from railpaper.models import single_wheelset as sw
 
 
+#: The chapter's per-record studies (the evidence store and the decisive run compute them).
+STUDIES = (evidence.MONTE_CARLO, evidence.HERTZ, kalman.ESTIMATOR_RECORDS,
+           kalman.TRACK_NOISE_RECORDS)
+
+
 def validate(settings: Settings) -> None:
     """Refuse non-physical or inconsistent settings with one line, before any work."""
     if settings.plant not in ("linear", "hertz"):
