@@ -249,7 +249,8 @@ def equivalence(deviations: Sequence[float] | None = None, margin: float = 0.1,
             return relative_change(baseline, other, lev)[1:]
     t_low, t_high = interval(tost_level)
     low, high = interval(level)
-    text = (f"relative difference {statistic:+.3g}, {tost_level:.0%} interval [{t_low:+.3g}, "
+    what = "mean relative deviation" if deviations is not None else "relative difference"
+    text = (f"{what} {statistic:+.3g}, {tost_level:.0%} interval [{t_low:+.3g}, "
             f"{t_high:+.3g}] (n = {n}) against ±{margin:g}")
     if -margin < t_low and t_high < margin:
         return Decision("reproduced", f"{text}: within it", statistic, t_low, t_high, n)

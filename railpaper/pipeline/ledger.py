@@ -19,6 +19,7 @@ the paper's (``method``) are counted apart as *attainable* claims.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import re
 from dataclasses import dataclass, replace
@@ -41,7 +42,12 @@ from railpaper.pipeline.claim_rules import (
     verdict_as_written,
     verdict_on_run,
 )
-from railpaper.pipeline.declarations import decide, load_declarations, load_registry
+from railpaper.pipeline.declarations import (
+    Declaration,
+    decide,
+    load_declarations,
+    load_registry,
+)
 from railpaper.pipeline.evidence_store import EvidenceStore
 from railpaper.pipeline.ledger_figure import plot_ledger
 from railpaper.rulebook import Decision, Vocabulary
@@ -280,12 +286,12 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
 
 
 def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | None,
-                  data_dir: Path = DATA_DIR) -> list[LedgerRow]:
+                  data_dir: Path = DATA_DIR, registry: dict | None = None) -> list[LedgerRow]:
     """The ledger rows of a chapter declared under the rulebook: each declaration decided by
     its class's procedure (:func:`railpaper.pipeline.declarations.decide`) at its registered
     size, with the registry's fingerprint and the evidence it read."""
     vocabulary = Vocabulary.load()
-    registry = load_registry()
+    registry = load_registry() if registry is None else registry
     values = dict((timings or {}).get("metrics", {}))
     values.update((run or {}).get("metrics", {}))
     rows = []
@@ -305,13 +311,26 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
         ours = ("—" if decision.statistic is None else f"{decision.statistic:.3g}" + (
             f" [{decision.low:.3g}, {decision.high:.3g}]" if decision.low is not None else "")
             + (f", n = {decision.n}" if decision.n else ""))
+        revised, original = "", ""
+        if entry.get("history") and run is not None:
+            before = entry["history"][-1]
+            revised = (f"declaration re-registered on {entry['date']} (previous of "
+                       f"{before['date']}, fingerprint {before['fingerprint']})")
+            old = Declaration(**{k: tuple(v) if isinstance(v, list) else v
+                                 for k, v in before["declaration"].items()})
+            old = dataclasses.replace(old, procedure=vocabulary.entry(old.word_class)["procedure"])
+            old_rows = (study_rows(chapter, old.study, out, run, before["size"])[0]
+                        if old.study else None)
+            original = decide(old, vocabulary, old_rows, values, before["size"]).verdict
         rows.append(LedgerRow(chapter, d.id, d.claim, d.source, paper, ours, verdict,
-                              decision.reason, d.reading, d.id.split("__")[0], d.word_class,
-                              list(d.paper_value) or None, decision.statistic, decision.low,
-                              decision.high, decision.n, d.kind, "", size, d.central,
+                              decision.reason, d.reading, d.id.split("__")[0],
+                              f"{d.procedure} ({d.word_class})", list(d.paper_value) or None,
+                              decision.statistic, decision.low, decision.high, decision.n,
+                              d.kind, "", size, False, revised, original,
                               procedure=d.procedure, words=d.words, horizon=d.horizon,
                               central=d.central, fingerprint=entry.get("fingerprint", ""),
                               evidence=evidence))
+    mark_headlines(rows)
     return rows
 
 

@@ -1,0 +1,84 @@
+"""A chapter declared under the rulebook: its ledger rows come from the declarations, the run's
+per-record rows and the registry (size, fingerprint, the previous declaration's verdict)."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pandas as pd
+
+from railpaper.pipeline import ledger
+from railpaper.pipeline.chapters import chapter_spec
+from railpaper.pipeline.declarations import parse, register
+from railpaper.rulebook import Vocabulary
+
+CHAPTER = "reduced-order-observer"
+ROW = {"id": "error_grows", "claim": "the force error grows with speed",
+       "words": "the wheel-rail force error increases", "source": "paper 001, abstract",
+       "kind": "population", "word_class": "trend", "study": "monte_carlo",
+       "metrics": ["error_60kmh", "error_100kmh"], "direction": "increase", "central": True}
+
+
+def _toml(row: dict) -> str:
+    lines = ["[[claim]]"]
+    for key, value in row.items():
+        lines.append(f"{key} = {json.dumps(value)}".replace("true", "true"))
+    return "\n".join(lines) + "\n"
+
+
+def _setup(tmp_path, row=ROW):
+    data = tmp_path / "data"
+    (data / CHAPTER).mkdir(parents=True)
+    (data / CHAPTER / "declarations.toml").write_text(_toml(row))
+    out = tmp_path / "run"
+    out.mkdir()
+    settings = chapter_spec(CHAPTER).resolve({}, False)
+    (out / "metrics.json").write_text(json.dumps({"parameters": settings.as_dict(),
+                                                  "quick": False, "metrics": {}}))
+    rng = np.random.default_rng(4)
+    base = 1.0 + 0.1 * rng.standard_normal(60)
+    pd.DataFrame({"seed": range(60), "error_60kmh": base, "error_100kmh": base * 1.5}).to_csv(
+        out / "records_monte_carlo.csv", index=False)
+    return data, out
+
+
+def test_declared_rows_are_decided_by_the_rulebook(tmp_path):
+    data, out = _setup(tmp_path)
+    run = json.loads((out / "metrics.json").read_text())
+    rows = ledger.declared_rows(CHAPTER, out, run, None, data, registry={})
+    (row,) = rows
+    assert row.verdict == "reproduced" and row.procedure == "paired-change"
+    assert row.evidence == "this run (60 records)" and row.central and row.headline
+    path = ledger.write_ledger_csv(rows, tmp_path / "ledger.csv")
+    written = next(csv.DictReader(path.open()))
+    assert written["procedure"] == "paired-change" and written["central"] == "true"
+    assert written["words"] == "the wheel-rail force error increases"
+    assert "holds on our evidence" in ledger.central_claims(rows)
+
+
+def test_a_revision_shows_the_previous_declarations_verdict(tmp_path):
+    vocabulary = Vocabulary.load()
+    old = parse(CHAPTER, dict(ROW, direction="decrease"), vocabulary)
+    registry, _ = register([old], vocabulary, {}, {old.key: 30}, "2026-12-01")
+    new = parse(CHAPTER, ROW, vocabulary)
+    registry, revised = register([new], vocabulary, registry, {new.key: 30}, "2026-12-06")
+    assert revised == [new.key]
+    data, out = _setup(tmp_path)
+    run = json.loads((out / "metrics.json").read_text())
+    (row,) = ledger.declared_rows(CHAPTER, out, run, None, data, registry=registry)
+    assert row.verdict == "reproduced" and row.original_verdict == "differs"
+    assert "re-registered on 2026-12-06" in row.revised
+    assert row.fingerprint == registry[new.key]["fingerprint"]
+
+
+def test_too_few_records_and_no_stored_evidence_is_undecided(tmp_path):
+    data, out = _setup(tmp_path)
+    run = json.loads((out / "metrics.json").read_text())
+    vocabulary = Vocabulary.load()
+    row = parse(CHAPTER, ROW, vocabulary)
+    registry, _ = register([row], vocabulary, {}, {row.key: 5000}, "2026-12-06")
+    (decided,) = ledger.declared_rows(CHAPTER, out, run, None, data, registry=registry)
+    assert decided.verdict == "undecided"
+    assert "60 records of the 5000 registered" in decided.reason   # the store holds fewer too
