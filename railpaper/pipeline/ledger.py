@@ -498,10 +498,41 @@ def chapter_claims_figure(chapter: str, out_dir: str | Path) -> Path:
                        Path(out_dir) / "claims_ledger.png")
 
 
+def declared_rules(chapter: str) -> str:
+    """How each declared row is decided: the paper's words, the word class they commit to and
+    its procedure and number from the vocabulary, the study's columns, the registered size and
+    fingerprint, and the blind reader's note."""
+    vocabulary, registry = Vocabulary.load(), load_registry()
+    lines = [f"Each row below was declared blind, from the paper alone (brief and reply in "
+             f"`data/{chapter}/blind/`), and is decided by the rulebook's procedure for its word "
+             "class, with the book-wide number of `data/vocabulary.toml`; no row carries a "
+             "threshold of its own. Sizes were registered by power before the deciding run.", ""]
+    for d in load_declarations(chapter, vocabulary):
+        entry, registered = vocabulary.entry(d.word_class), registry.get(d.key, {})
+        number = (f"threshold {entry['threshold']:g}" if "threshold" in entry else
+                  f"margin {entry['margin']:g}" if "margin" in entry else "no number")
+        reading = f" — reading: {d.reading}" if d.reading else ""
+        metrics = ", ".join(f"`{m}`" for m in d.metrics) or "none"
+        size = registered.get("size")
+        lines.append(
+            f"- **{d.claim}**{reading}. *Words:* “{d.words}” ({d.source}). *Class:* "
+            f"{d.word_class} → {d.procedure}, {number}"
+            + (f", direction {d.direction}" if d.direction else "")
+            + f". *Reads:* {metrics}" + (f" of study `{d.study}`" if d.study else "")
+            + (f"; registered size {size} records" if size else "")
+            + (f"; fingerprint `{registered['fingerprint']}`" if registered else "; not registered")
+            + (f". *Reader's note:* {d.note}" if d.note else ".")
+            .replace("\n", " "))
+    return "\n".join(lines).replace("$", "\\$") + "\n"
+
+
 def chapter_rules(chapter: str) -> str:
-    """How each of a chapter's verdicts is decided: the rule, fixed from the paper's wording,
-    and why (a Markdown list: one item per claim, one sub-item per reading; a rule or a reason
-    already given on the page is referred to, not repeated)."""
+    """How each of a chapter's verdicts is decided: for a declared chapter its declarations
+    (:func:`declared_rules`); else the rule, fixed from the paper's wording, and why (a Markdown
+    list: one item per claim, one sub-item per reading; a rule or a reason already given on the
+    page is referred to, not repeated)."""
+    if (DATA_DIR / chapter / "declarations.toml").exists():
+        return declared_rules(chapter)
     lines = ["How each verdict is decided (the rule, fixed from the paper's wording, and why):", ""]
     groups: dict[str, list[tuple[str, dict]]] = {}
     for key, row in claims(chapter).items():
