@@ -85,7 +85,7 @@ def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
     sizes = {}
     for d in rows:
         sigma = None
-        if d.procedure in ("paired-change", "equivalence"):
+        if d.procedure in ("paired-change", "equivalence") and d.study:
             if d.study not in pilots:
                 study = chapter_studies(chapter)[d.study]
                 pilots[d.study] = map_in_process(study, settings, range(

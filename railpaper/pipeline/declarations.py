@@ -144,16 +144,18 @@ def _as_list(value) -> list:
 
 def _check_shape(d: Declaration, where: str) -> None:
     """What each procedure needs of a row."""
-    needs_study = d.procedure in ("single-run", "population-rate", "paired-change", "equivalence")
+    needs_study = d.procedure in ("single-run", "population-rate", "paired-change")
     if needs_study and not d.study:
         raise DataError(f"{where}: a {d.procedure} row names the study whose records decide it")
+    if d.procedure == "equivalence" and not d.study and len(d.metrics) != 1:
+        raise DataError(f"{where}: an equivalence without a study reads one exact run metric")
     if d.procedure == "paired-change":
         if len(d.metrics) != 2 or d.direction not in DIRECTIONS:
             raise DataError(f"{where}: a paired change needs metrics [baseline, other] and "
                             f"direction {' or '.join(DIRECTIONS)}")
     if d.procedure == "population-rate" and len(d.metrics) != 1:
         raise DataError(f"{where}: a rate reads one per-record yes/no column")
-    if d.procedure == "equivalence" and len(d.metrics) not in (1, 2):
+    if d.procedure == "equivalence" and d.study and len(d.metrics) not in (1, 2):
         raise DataError(f"{where}: an equivalence reads deviations, or [baseline, other]")
     if d.procedure in ("single-run", "deterministic"):
         if not d.paper_value or len(d.paper_value) != len(d.metrics):
@@ -201,7 +203,7 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
     if declaration.procedure == "single-run":
         return max(floor, single_run_size(policy["alpha_single_run"],
                                           policy["single_run_resolution"], level, power))
-    if declaration.procedure in ("paired-change", "equivalence"):
+    if declaration.procedure in ("paired-change", "equivalence") and declaration.study:
         return None if pilot_sigma is None else max(floor, continuous_size(
             pilot_sigma, entry["margin"], level, power))
     return None
@@ -248,7 +250,8 @@ def register(declarations: list[Declaration], vocabulary: Vocabulary,
              ) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """A new registry with every row's current fingerprint and size (``sizes`` by key): an
     unchanged row keeps its entry; a changed one moves its previous entry to ``history`` and is
-    marked a revision.  Returns the registry and the keys revised."""
+    marked a revision; a registered row of the same chapters that is no longer declared is kept,
+    marked ``dropped``.  Returns the registry and the keys revised."""
     new, revised = dict(registry), []
     for d in declarations:
         size = sizes.get(d.key)
@@ -262,6 +265,12 @@ def register(declarations: list[Declaration], vocabulary: Vocabulary,
             revised.append(d.key)
         new[d.key] = {"fingerprint": current, "size": size, "date": date,
                       "declaration": d.canonical(), "history": history}
+    chapters = {d.chapter for d in declarations}
+    kept = {d.key for d in declarations}
+    for key, entry in registry.items():          # a row no longer declared: kept, marked
+        if key.split("/")[0] in chapters and key not in kept and "dropped" not in entry:
+            new[key] = dict(entry, dropped=date)
+            revised.append(key)
     return new, revised
 
 
@@ -271,8 +280,9 @@ def write_registry(registry: dict[str, dict[str, Any]], path: Path = REGISTRY_FI
 
 
 def revisions(registry: dict[str, dict[str, Any]]) -> int:
-    """Rows registered more than once: the intro's revision count."""
-    return sum(1 for entry in registry.values() if entry.get("history"))
+    """Rows registered more than once or dropped after registration: the intro's revision
+    count."""
+    return sum(1 for entry in registry.values() if entry.get("history") or entry.get("dropped"))
 
 
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
@@ -283,6 +293,14 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     *undecided* and says how many it needs."""
     d, policy = declaration, vocabulary.policy
     entry = vocabulary.entry(d.word_class)
+    if d.procedure == "equivalence" and not d.study:       # one exact value of the run
+        value = metrics.get(d.metrics[0])
+        if value is None:
+            return Decision("undecided", f"the run has no metric {d.metrics[0]!r}")
+        inside = abs(float(value)) < entry["margin"]
+        return Decision("reproduced" if inside else "differs",
+                        f"exact deviation {float(value):+.3g} {'within' if inside else 'beyond'} "
+                        f"±{entry['margin']:g}", float(value))
     if d.procedure in ("single-run", "population-rate", "paired-change", "equivalence"):
         if rows is None or len(rows) == 0:
             return Decision("undecided", f"no records of study {d.study!r}")

@@ -157,3 +157,21 @@ def test_a_speed_claim_without_a_metric_is_undecided_or_not_testable():
     row = declaration(kind="implementation", word_class="real-time", metrics=[], study="",
                       direction="", paper_rate_hz=10000.0)
     assert decide(row, VOCABULARY, None, {}).verdict == "undecided"
+
+
+def test_an_exact_value_against_the_similarity_margin():
+    row = declaration(word_class="similarity", metrics=["ratio_deviation"], study="",
+                      direction="")
+    assert registered_size(row, VOCABULARY) is None
+    assert decide(row, VOCABULARY, None, {"ratio_deviation": 0.04}).verdict == "reproduced"
+    assert decide(row, VOCABULARY, None, {"ratio_deviation": -0.3}).verdict == "differs"
+    with pytest.raises(DataError, match="reads one exact run metric"):
+        declaration(word_class="similarity", metrics=["a", "b"], study="", direction="")
+
+
+def test_a_dropped_row_stays_in_the_registry_marked():
+    a, b = declaration(), declaration(id="other")
+    registry, _ = register([a, b], VOCABULARY, {}, {}, "2026-12-06")
+    registry, revised = register([a], VOCABULARY, registry, {}, "2026-12-07")
+    assert revised == ["demo/other"] and registry["demo/other"]["dropped"] == "2026-12-07"
+    assert revisions(registry) == 1 and check_registry([a], VOCABULARY, registry) == []
