@@ -146,7 +146,8 @@ def test_no_decided_verdict_while_its_interval_straddles_a_threshold(built_book)
     book = built_book.parent.parent
     problems, checked = [], 0
     for row in build_ledger(paper_chapters(), book / "chapters"):
-        if row.verdict not in DECIDED_VERDICTS:
+        # a declared row's procedure reads its interval's bounds itself (tests/test_rulebook.py)
+        if row.verdict not in DECIDED_VERDICTS or row.procedure:
             continue
         rule = claims(row.chapter)[row.key]
         out = book / "chapters" / row.chapter

@@ -8,6 +8,7 @@ import re
 import pytest
 
 from railpaper.data import DataError, read_toml
+from railpaper.paths import DATA_DIR
 from railpaper.pipeline.chapters import book_chapters, paper_chapters
 from railpaper.pipeline.ledger import (
     CSV_COLUMNS,
@@ -156,7 +157,7 @@ def test_missing_metric_and_missing_run(toy, tmp_path):
 def test_non_default_parameters_noted_and_judged(monkeypatch, tmp_path):
     from railpaper.pipeline import ledger
     chapter = book_chapters()[0]
-    defaults = ledger.chapter_spec(chapter).resolve({}, True)
+    defaults = ledger.chapter_spec(chapter).resolve({}, True).as_dict()
     run = {"parameters": dict(defaults, seed=7), "quick": True}
     assert ledger.non_default_note(chapter, run).startswith("Non-default parameters: seed.")
     assert ledger.non_default_note(chapter, {"parameters": defaults, "quick": True}) == ""
@@ -318,8 +319,26 @@ def test_environment_table_matches_the_installed_packages(tmp_path):
     assert "| python | 3.11 " in text
 
 
-@pytest.mark.parametrize("chapter", ["reduced-order-observer", "partial-state-observer",
-                                     "rbpf-parameter-estimation", "quasi-gaussian-rbpf"])
+V2_CHAPTERS = [c for c in ["reduced-order-observer", "partial-state-observer",
+                            "rbpf-parameter-estimation", "quasi-gaussian-rbpf"]
+               if not (DATA_DIR / c / "declarations.toml").exists()]
+DECLARED_CHAPTERS = [c for c in ["reduced-order-observer", "partial-state-observer",
+                                 "rbpf-parameter-estimation", "quasi-gaussian-rbpf"]
+                     if (DATA_DIR / c / "declarations.toml").exists()]
+
+
+@pytest.mark.parametrize("chapter", DECLARED_CHAPTERS)
+def test_declared_chapter_rules_list_every_declaration(chapter):
+    from railpaper.pipeline.declarations import load_declarations
+    from railpaper.pipeline.ledger import chapter_rules
+    text = chapter_rules(chapter)
+    for d in load_declarations(chapter):
+        assert f"**{d.claim}**" in text and f"“{d.words}”" in text.replace("\\$", "$")
+        assert f"{d.word_class} → {d.procedure}" in text
+    assert "no row carries a threshold of its own" in text
+
+
+@pytest.mark.parametrize("chapter", V2_CHAPTERS)
 def test_chapter_rules_gives_each_rule_and_reason_once_and_every_reading(chapter):
     from railpaper.pipeline.ledger import chapter_rules
     from railpaper.pipeline.outputs import claims

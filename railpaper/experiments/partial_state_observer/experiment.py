@@ -203,7 +203,9 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> PartialStateObs
     timings["run_s"] = time.perf_counter() - started
     return PartialStateObserverResult(
         metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),
-        extra_tables={"monte_carlo": mc, "alpha_sweep": sweep}, design=ctx, designs=ctxs,
+        extra_tables={"monte_carlo": mc, "alpha_sweep": sweep, "records_monte_carlo": rows,
+                      f"records_kalman_baseline_{chosen}": kalman_rows},
+        design=ctx, designs=ctxs,
         records={s: Record.from_run(tr) for s, tr in truths.items()},
         estimates={s: Estimates.from_dict(e) for s, e in default.items()},
         noise_free={s: Estimates.from_dict(e) for s, e in clean.items()},
