@@ -7,6 +7,7 @@ no traceback.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import re
 import signal
@@ -218,6 +219,14 @@ def cmd_build(args) -> int:
 
 def cmd_bench(args) -> int:
     from railpaper.bench.report import run_bench
+    if args.scaling:
+        from railpaper.pipeline.chapters import book_chapters
+        from railpaper.pipeline.scaling import run_scaling
+        payload = run_scaling(book_chapters(), alternations=args.alternations)
+        if args.out:
+            args.out.write_text(json.dumps(payload, indent=1) + "\n")
+            print(f"railpaper: scaling benchmark written to {args.out}")
+        return 0
     if args.out is not None:                      # refuse before a minute of benchmarking
         if args.out.suffix != ".json":
             raise ValueError(f"bench --out {args.out}: expected a .json file name")
@@ -351,6 +360,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true",
                    help="fewer steps and alternations, same N (about half a minute)")
     p.add_argument("--out", type=Path, help="write the results as JSON (and a PNG plot beside)")
+    p.add_argument("--scaling", action="store_true",
+                   help="instead: each chapter's Monte Carlo records on 1 and 2 dask workers, "
+                   "alternated, on about 5 %% of its decisive evidence")
+    p.add_argument("--alternations", type=int, default=3, help="--scaling: 1/2-worker pairs")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("track", help="export a synthetic track irregularity profile as CSV")
