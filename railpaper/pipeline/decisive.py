@@ -34,6 +34,7 @@ from railpaper.paths import DATA_DIR
 from railpaper.pipeline.chapters import PipelineError, chapter_spec
 from railpaper.pipeline.declarations import (
     Declaration,
+    decide,
     load_declarations,
     load_registry,
     register,
@@ -187,7 +188,38 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
         spent += cpu
         done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record}))
         _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
+    for chapter in chapters:
+        if (root / chapter / "provenance.json").exists():
+            write_stored_verdicts(chapter, root)
     return done
+
+
+def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
+    """Each sampled declared row's decision on the stored evidence alone: its first registered
+    size of records (the records the default book decides it on); rows whose study holds fewer
+    are left out."""
+    vocabulary, registry = Vocabulary.load(), load_registry()
+    settings = chapter_spec(chapter).resolve({}, False)
+    store, out = EvidenceStore(root), {}
+    for d in load_declarations(chapter, vocabulary):
+        size = registry.get(d.key, {}).get("size")
+        if not d.study or not size:
+            continue
+        rows = store.read(RecordStudy(chapter, d.study, rows=None), settings)
+        if len(rows) < size:
+            continue
+        rows = rows.drop(columns="commit").sort_values("seed", kind="stable").head(size)
+        decision = decide(d, vocabulary, rows.reset_index(drop=True), {}, size)
+        out[d.id] = {"verdict": decision.verdict, "statistic": decision.statistic,
+                     "low": decision.low, "high": decision.high, "n": decision.n}
+    return out
+
+
+def write_stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> Path:
+    """``<root>/<chapter>/verdicts.json``: :func:`stored_verdicts`, which CI recomputes."""
+    path = root / chapter / "verdicts.json"
+    path.write_text(json.dumps(stored_verdicts(chapter, root), indent=1, sort_keys=True) + "\n")
+    return path
 
 
 def _stored_cpu_per_record(folder: Path, study: str) -> float:
@@ -235,5 +267,5 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 
 
 __all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "chapter_studies",
-           "check_provenance", "machine", "pilot_sigma", "plan",
+           "check_provenance", "machine", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -274,15 +274,24 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     path = out / f"records_{study}.csv"
     mine = pd.read_csv(path) if path.exists() else None
     if size is None or (mine is not None and len(mine) >= size) or run is None:
-        return mine, f"this run ({0 if mine is None else len(mine)} records)"
+        return deciding_rows(mine, size), f"this run ({0 if mine is None else len(mine)} records)"
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
     stored = store.read(RecordStudy(chapter, study, rows=None), settings)
     if len(stored) >= size:
         folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
-        return (stored.drop(columns="commit"),
+        return (deciding_rows(stored.drop(columns="commit"), size),
                 f"{folder.relative_to(DATA_DIR.parent)} ({len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
+
+
+def deciding_rows(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame | None:
+    """The records a row is decided on: the first ``size`` by seed (its registered size, fixed
+    before the deciding run), all of them without a size.  A run with more records than that
+    and the stored decisive evidence thus decide on the same records, the same bits."""
+    if rows is None or size is None:
+        return rows
+    return rows.sort_values("seed", kind="stable").head(size).reset_index(drop=True)
 
 
 def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | None,

@@ -9,7 +9,12 @@ import pytest
 
 from railpaper.experiments.records import RecordStudy
 from railpaper.pipeline.chapters import chapter_spec
-from railpaper.pipeline.decisive import DECISIVE_DIR, chapter_studies, check_provenance
+from railpaper.pipeline.decisive import (
+    DECISIVE_DIR,
+    chapter_studies,
+    check_provenance,
+    stored_verdicts,
+)
 from railpaper.pipeline.evidence_store import EvidenceStore
 
 STORED = sorted((path.parent.name, study) for path in DECISIVE_DIR.glob("*/provenance.json")
@@ -32,3 +37,13 @@ def test_stored_records_are_reproduced_bit_for_bit(chapter, study):
     checked = store.verify(chapter_studies(chapter)[study], settings, rows, "(this checkout)",
                            n_records=2)
     assert len(checked) == 2
+
+
+@pytest.mark.parametrize("chapter", sorted({chapter for chapter, _ in STORED}))
+def test_stored_verdicts_are_what_the_evidence_decides(chapter):
+    """The verdicts the stored evidence gives each declared row at its registered size — the
+    default book's verdicts — are the ones recorded beside it (verdicts.json): a change to the
+    rulebook, the vocabulary, a declaration or the evidence that moves one fails here, and
+    'railpaper evidence --decisive' rewrites the file after a registered revision."""
+    recorded = json.loads((DECISIVE_DIR / chapter / "verdicts.json").read_text())
+    assert stored_verdicts(chapter) == recorded
