@@ -87,8 +87,9 @@ def column_types(frame: pd.DataFrame) -> dict[str, str]:
 def read_rows(text: str, types: dict[str, str]) -> pd.DataFrame:
     """Rows written by :func:`normalised`'s CSV (or the store's), with their column ``types``:
     a float column whose values are all whole numbers stays float."""
-    return pd.read_csv(io.StringIO(text),
-                       dtype={k: (str if v == "object" else v) for k, v in types.items()})
+    frame = pd.read_csv(io.StringIO(text),
+                        dtype={k: (str if v == "object" else v) for k, v in types.items()})
+    return frame.copy()              # one block per dtype (read_csv with dtypes leaves hundreds)
 
 
 def normalised(frame: pd.DataFrame) -> pd.DataFrame:
