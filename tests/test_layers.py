@@ -11,7 +11,13 @@ Layers, lowest first::
 Every ``import``/``from … import`` counts, including the ones inside functions; the tests below
 also fail on an import cycle among ``railpaper`` modules, on an import of ``railpaper`` inside a
 function outside ``cli.py`` (the usual way to hide a cycle or an upward import), on loading code
-by file path (``spec_from_file_location``), and on an upward import inside a chapter package.
+by file path (``spec_from_file_location``), on an upward import inside a chapter package, and on
+an import of an engine submodule from outside the engine: ``railpaper.engine`` (its
+``__init__``) is the engine's only door, so ``from railpaper.engine.rbpf import X``,
+``import railpaper.engine.rbpf`` and ``from railpaper.engine import rbpf`` all fail and
+``from railpaper.engine import X`` is the way.  These rules are for the package ``railpaper/``
+only: the walk reads nothing else, and the tests under ``tests/engine`` import submodules on
+purpose (they test the engine's internals).
 """
 
 from __future__ import annotations
@@ -64,21 +70,30 @@ def _nodes(node: ast.AST, inner: bool = False):
         yield from _nodes(child, inside)
 
 
+def _package(path: Path, package_dir: Path) -> str:
+    """Dotted name of the package a file belongs to (itself for an ``__init__``)."""
+    dotted = module_name(path, package_dir)
+    return dotted if path.name == "__init__.py" else dotted.rsplit(".", 1)[0]
+
+
+def from_module(node: ast.ImportFrom, package: str) -> str:
+    """The dotted module of ``from … import``, a relative one resolved against ``package``."""
+    if not node.level:
+        return node.module or ""
+    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def imports(path: Path, package_dir: Path) -> list[tuple[int, str, bool]]:
     """(line, dotted module, inside a function) of every import in the file at ``path``."""
     tree = ast.parse(path.read_text(), filename=str(path))
-    dotted = module_name(path, package_dir)
-    package = dotted if path.name == "__init__.py" else dotted.rsplit(".", 1)[0]
+    package = _package(path, package_dir)
     found = []
     for node, inner in _nodes(tree):
         if isinstance(node, ast.Import):
             found += [(node.lineno, alias.name, inner) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:                      # relative import: resolve against the package
-                base = package.split(".")[: len(package.split(".")) - node.level + 1]
-                mod = ".".join(base + ([node.module] if node.module else []))
-            else:
-                mod = node.module or ""
+            mod = from_module(node, package)
             found.append((node.lineno, mod, inner))
             # ``from railpaper import models`` / ``from railpaper.engine import rbpf``: a name may
             # be a sub-package or a module, so each counts as an import of mod.name as well
@@ -147,16 +162,55 @@ def chapter_of(module: str) -> tuple[str, str] | None:
     return None
 
 
+def engine_exports(package_dir: Path) -> set[str]:
+    """The names the engine's ``__init__`` binds by its imports (``grid_posterior`` is both a
+    submodule and the function the ``__init__`` binds over it: the function is imported)."""
+    init = package_dir / "engine" / "__init__.py"
+    if not init.exists():
+        return set()
+    return {alias.asname or alias.name for node in ast.walk(ast.parse(init.read_text()))
+            if isinstance(node, ast.ImportFrom) for alias in node.names}
+
+
+def engine_submodule_imports(path: Path, package_dir: Path, known: dict[str, Path],
+                             exports: set[str]) -> list[tuple[int, str]]:
+    """(line, engine submodule) of every import of one in the file at ``path``:
+    ``import railpaper.engine.rbpf``, ``from railpaper.engine.rbpf import X`` (or relative) and
+    ``from railpaper.engine import rbpf`` for a submodule the ``__init__`` does not bind over."""
+    package = _package(path, package_dir)
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            dotted = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mod = from_module(node, package)
+            dotted = [mod] if mod.startswith("railpaper.engine.") else \
+                [f"{mod}.{alias.name}" for alias in node.names
+                 if mod == "railpaper.engine" and f"{mod}.{alias.name}" in known
+                 and alias.name not in exports]
+        else:
+            continue
+        found += [(node.lineno, ".".join(name.split(".")[:3])) for name in dotted
+                  if name.startswith("railpaper.engine.")]
+    return sorted(set(found))
+
+
 def violations(package_dir: Path) -> list[str]:
-    """Every upward or sideways import, hidden import and path load under ``package_dir``."""
+    """Every upward or sideways import, hidden import, engine-submodule import from outside the
+    engine and path load under ``package_dir``."""
     bad = []
     known = modules(package_dir)
     chapters = {p.parent.name for p in package_dir.glob("experiments/*/__init__.py")}
+    exports = engine_exports(package_dir)
     for dotted, path in known.items():
         where = path.relative_to(package_dir.parent)
         own = part_of(dotted)
         if "spec_from_file_location" in path.read_text():
             bad.append(f"{where}: loads code by file path (spec_from_file_location)")
+        if own != "engine":
+            bad += [f"{where}:{line}: imports the engine submodule {sub} (outside the engine, "
+                    f"import from railpaper.engine)"
+                    for line, sub in engine_submodule_imports(path, package_dir, known, exports)]
         for line, mod, inner in imports(path, package_dir):
             other = part_of(mod)
             if other is None or mod == "railpaper":
@@ -204,8 +258,10 @@ def _planted_package(tmp_path: Path) -> Path:
     (pkg / "pipeline" / "ok.py").write_text("from railpaper.bench import ok\n")
     (pkg / "bench" / "ok.py").write_text("from railpaper.experiments.ch import experiment\n")
     (pkg / "engine" / "ok.py").write_text("from railpaper.linear import X\nfrom railpaper import linear\n")
-    (pkg / "models" / "ok.py").write_text("from railpaper.engine.ok import X\n")
-    (pkg / "estimators" / "ok.py").write_text("from . import kalman\nfrom railpaper.engine import ok\n")
+    (pkg / "engine" / "__init__.py").write_text("from railpaper.engine.ok import X\n")
+    (pkg / "models" / "ok.py").write_text("from railpaper.engine import X\n")
+    (pkg / "estimators" / "ok.py").write_text("from . import kalman\n"
+                                              "from railpaper.engine import X\n")
     (pkg / "estimators" / "kalman.py").write_text("import numpy\n")
     (pkg / "experiments" / "ch" / "spec.py").write_text("from railpaper.models import ok\n")
     (pkg / "experiments" / "ch" / "result.py").write_text("from . import spec\n")
@@ -235,12 +291,30 @@ def _planted_package(tmp_path: Path) -> Path:
     ("experiments/ch/result.py", "from .toy import T\n"),
     ("experiments/ch/figures.py", "from .evidence import E\n"),
     ("experiments/ch/spec.py", "from railpaper.experiments.ch.result import R\n"),
+    ("models/m.py", "from railpaper.engine.ok import X\n"),
+    ("estimators/e.py", "import railpaper.engine.ok\n"),
+    ("experiments/x.py", "from railpaper.engine import ok\n"),
+    ("bench/b.py", "from ..engine.ok import X\n"),
 ])
 def test_a_planted_violation_is_found(tmp_path, where, source):
     pkg = _planted_package(tmp_path)
     assert violations(pkg) == []
     (pkg / where).write_text(source)
     assert len(violations(pkg)) >= 1
+
+
+def test_an_engine_submodule_import_is_found(tmp_path):
+    """Outside the engine only ``from railpaper.engine import X`` passes, by either import form;
+    inside the engine (its ``__init__`` here) submodules are imported freely."""
+    pkg = _planted_package(tmp_path)
+    (pkg / "bench" / "door.py").write_text("from railpaper.engine import X\n")
+    assert violations(pkg) == []
+    (pkg / "bench" / "door.py").write_text("from railpaper.engine import X\n"
+                                           "from railpaper.engine.ok import X, Y\n"
+                                           "import railpaper.engine.ok\n")
+    assert violations(pkg) == [
+        f"railpaper/bench/door.py:{line}: imports the engine submodule railpaper.engine.ok "
+        "(outside the engine, import from railpaper.engine)" for line in (2, 3)]
 
 
 def test_a_planted_cycle_is_found(tmp_path):

@@ -19,15 +19,8 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 from scipy.linalg import expm
 
-from railpaper.engine.kalman import LOG_2PI
-from railpaper.engine.particles import (
-    effective_sample_size,
-    liu_west_move,
-    normalise_log_weights,
-    systematic_resample,
-    weighted_mean_cov,
-)
-from railpaper.engine.rbpf import mixture_moments
+from railpaper.engine import (LOG_2PI, effective_sample_size, liu_west_move, mixture_moments,
+                              normalise_log_weights, systematic_resample, weighted_mean_cov)
 
 
 class FilterpyRBPF:

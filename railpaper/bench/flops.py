@@ -22,11 +22,8 @@ import time
 
 import numpy as np
 
-from railpaper.engine.kalman_bank import measurement_pattern
-from railpaper.engine.kalman_bank import multiply_adds as bank_multiply_adds
-from railpaper.engine.sparse_zoh import multiply_adds as zoh_multiply_adds
-from railpaper.engine.sparse_zoh import term_counts
-from railpaper.models import lateral_16state as L
+from railpaper.engine import bank_multiply_adds, measurement_pattern, term_counts, zoh_multiply_adds
+from railpaper.models import lateral_16state
 
 NOMINAL_FLOP_PER_CYCLE = 32      # per core, double: two 512-bit FMA units (8 lanes x 2 FLOP x 2)
 
@@ -64,14 +61,15 @@ def step_budget(prob: dict, profile_ms: dict, N: int = 1000, seed: int = 11) -> 
     settings, theta = prob["settings"], prob["theta"]
     rng = np.random.default_rng(seed)
     th = theta * rng.uniform(settings.prior_low, settings.prior_high, (N, 5))
-    A = L.a_of_theta(prob["A0"], prob["Ak"], th)
-    B = L.input_matrix()
+    A = lateral_16state.a_of_theta(prob["A0"], prob["Ak"], th)
+    B = lateral_16state.input_matrix()
     K, s = term_counts(A, B, settings.dt_s)
     nnz = int(np.count_nonzero((A != 0).any(axis=0))) + int(np.count_nonzero(B))
-    n, m, n_ch = L.N_STATES, B.shape[1], len(L.CHANNELS)
+    n, m, n_ch = lateral_16state.N_STATES, B.shape[1], len(lateral_16state.CHANNELS)
     zoh_madds = float(np.mean([zoh_multiply_adds(nnz, n, m, int(k), int(q))
                                for k, q in zip(K, s)]))
-    h_row_nonzeros = measurement_pattern(L.measurement_matrix(A))[1]   # as the kernels skip
+    # as the kernels skip
+    h_row_nonzeros = measurement_pattern(lateral_16state.measurement_matrix(A))[1]
     bank_madds = bank_multiply_adds(n, n_ch, m, h_row_nonzeros)
     bank_gflop = 2.0 * bank_madds * N / 1e9
     zoh_gflop = 2.0 * zoh_madds * N / 1e9

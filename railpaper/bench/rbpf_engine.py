@@ -30,18 +30,14 @@ import numpy as np
 from railpaper.bench.filterpy_rbpf import FilterpyRBPF
 from railpaper.bench.flops import step_budget
 from railpaper.discretise import zoh
-from railpaper.engine import rbpf as rbpf_module
-from railpaper.engine.ibis import run_ibis
-from railpaper.engine.kalman_bank import kalman_run
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
-from railpaper.engine.qgrbpf import QuasiGaussianRBPF
-from railpaper.engine.rbpf import RaoBlackwellisedPF
+from railpaper.engine import (LinearGaussianBatch, QuasiGaussianRBPF, RaoBlackwellisedPF,
+                              kalman_run, run_ibis)
 from railpaper.experiments.lateral_vehicle import RecordSettings, prior_centre
-from railpaper.experiments.rbpf_parameter_estimation import experiment as E
+from railpaper.experiments.rbpf_parameter_estimation import experiment
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.posterior import MIN_MOVES, PROPOSAL
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
 
 REPEATS = 5                    # alternations of every interleaved comparison (full sizes)
@@ -55,20 +51,20 @@ PROFILE_SKIP = 5               # the profiled filter's untimed first steps
 def lateral_problem(n_steps: int, seed: int = 0) -> dict:
     """The chapter's default lateral record (n_steps at 1 kHz) and the filter's model; the
     chapter's settings under ``"settings"``."""
-    settings = E.SPEC.resolve({"n_steps": max(n_steps, 400)}, False)
+    settings = experiment.SPEC.resolve({"n_steps": max(n_steps, 400)}, False)
     fixed, theta = study.vehicle()
     data = study.simulate_lateral(RecordSettings.of(settings), fixed, theta, seed)
     Q, R = study.filter_noise(fixed, theta, RecordSettings.of(settings), data.du_var_m2ps2)
     v = settings.speed_kmh / 3.6
-    A0, Ak = L.affine_terms(fixed, v)
-    fast = L.lateral_system(fixed, v, settings.dt_s, Q, R,
-                            theta_ref=prior_centre(theta, settings.prior_low,
-                                                   settings.prior_high))
+    A0, Ak = lateral_16state.affine_terms(fixed, v)
+    fast = lateral_16state.lateral_system(fixed, v, settings.dt_s, Q, R,
+                                          theta_ref=prior_centre(theta, settings.prior_low,
+                                                                 settings.prior_high))
 
     def textbook(th):                          # stacked scipy expm: the straightforward path
-        A = L.a_of_theta(A0, Ak, th)
-        F, G = zoh(A, L.input_matrix(), settings.dt_s)
-        return LinearGaussianBatch(F, Q, L.measurement_matrix(A), R, G)
+        A = lateral_16state.a_of_theta(A0, Ak, th)
+        F, G = zoh(A, lateral_16state.input_matrix(), settings.dt_s)
+        return LinearGaussianBatch(F, Q, lateral_16state.measurement_matrix(A), R, G)
 
     return dict(settings=settings, theta=theta, y=data.y, u=data.u_mps, Q=Q, R=R, A0=A0, Ak=Ak,
                 systems={"compiled": fast, "numpy": textbook})
@@ -89,13 +85,14 @@ def make_filter(prob: dict, kind: str, N: int, seed: int = 11):
     rng = np.random.default_rng(seed)
     settings, theta = prob["settings"], prob["theta"]
     theta0 = theta * rng.uniform(settings.prior_low, settings.prior_high, (N, 5))
-    x0, P0 = np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES)
+    x0, P0 = np.zeros(lateral_16state.N_STATES), 1e-10 * np.eye(lateral_16state.N_STATES)
     if name == "qgrbpf":
         return QuasiGaussianRBPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine)
     opts = scheme_options(settings, name.split("-")[1])
     if engine == "filterpy":
-        return FilterpyRBPF(prob["A0"], prob["Ak"], L.input_matrix(), L.measurement_matrix,
-                            settings.dt_s, prob["Q"], prob["R"], theta0, x0, P0, rng, **opts)
+        return FilterpyRBPF(prob["A0"], prob["Ak"], lateral_16state.input_matrix(),
+                            lateral_16state.measurement_matrix, settings.dt_s, prob["Q"],
+                            prob["R"], theta0, x0, P0, rng, **opts)
     return RaoBlackwellisedPF(prob["systems"][engine], theta0, x0, P0, rng, engine=engine,
                               **opts)
 
@@ -147,7 +144,8 @@ def time_ibis(prob: dict, N: int, n_steps: int, seed: int = 11) -> tuple[float, 
     settings, theta = prob["settings"], prob["theta"]
     t0 = time.perf_counter()
     run = run_ibis(prob["systems"]["compiled"], prob["y"][:n_steps], settings.prior_low * theta,
-                   settings.prior_high * theta, np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
+                   settings.prior_high * theta, np.zeros(lateral_16state.N_STATES),
+                   1e-10 * np.eye(lateral_16state.N_STATES),
                    np.random.default_rng(seed), u=prob["u"][:n_steps], n_particles=N,
                    proposal=PROPOSAL, min_moves=MIN_MOVES)
     return ((time.perf_counter() - t0) / n_steps, len(run.resample_steps),
@@ -187,20 +185,16 @@ def profile_step(prob: dict, N: int, repeats: int) -> dict:
             return out
         return wrapper
 
-    bank = rbpf_module.kalman_step
-    rbpf_module.kalman_step = timed(bank, "kalman_bank_ms")      # what bank_step calls
+    filt.bank_step = timed(filt.bank_step, "kalman_bank_ms")
     filt.system = timed(filt.system, "zoh_all_particles_ms")
     per_step = []
-    try:
-        for k in range(repeats):
-            spent.update(dict.fromkeys(spent, 0.0))
-            t0 = time.perf_counter()
-            filt.step(prob["y"][PROFILE_SKIP + k], prob["u"][PROFILE_SKIP + k])
-            total = time.perf_counter() - t0
-            per_step.append((spent["kalman_bank_ms"], spent["zoh_all_particles_ms"],
-                             total - spent["kalman_bank_ms"] - spent["zoh_all_particles_ms"]))
-    finally:
-        rbpf_module.kalman_step = bank
+    for k in range(repeats):
+        spent.update(dict.fromkeys(spent, 0.0))
+        t0 = time.perf_counter()
+        filt.step(prob["y"][PROFILE_SKIP + k], prob["u"][PROFILE_SKIP + k])
+        total = time.perf_counter() - t0
+        per_step.append((spent["kalman_bank_ms"], spent["zoh_all_particles_ms"],
+                         total - spent["kalman_bank_ms"] - spent["zoh_all_particles_ms"]))
     medians = np.median(np.array(per_step), axis=0) * 1e3
     return dict(zip(("kalman_bank_ms", "zoh_all_particles_ms", "rest_of_paper_scheme_step_ms"),
                     (float(v) for v in medians)))
@@ -235,11 +229,11 @@ def gain_settling(prob: dict, steps: int = 3000) -> dict:
     d_j − y_wj the measurements do not see)."""
     s = prob["systems"]["numpy"](prob["theta"][None])
     F, H, Q, R = s.F[0], s.H[0], s.Q, s.R
-    P, K_old, change = 1e-10 * np.eye(L.N_STATES), None, {}
+    P, K_old, change = 1e-10 * np.eye(lateral_16state.N_STATES), None, {}
     for k in range(1, steps + 1):
         P = F @ P @ F.T + Q
         K = np.linalg.solve(H @ P @ H.T + R, H @ P).T
-        I_KH = np.eye(L.N_STATES) - K @ H
+        I_KH = np.eye(lateral_16state.N_STATES) - K @ H
         P = I_KH @ P @ I_KH.T + K @ R @ K.T
         if k in (FIRST_STEPS, steps):
             change[k] = float(np.linalg.norm(K - K_old) / np.linalg.norm(K))
@@ -271,7 +265,7 @@ def _peak_rss_mb(N: int, n_steps: int) -> float:
 def peak_memory_mb(N: int, n_steps: int) -> dict:
     """Peak RSS at N and at N = 10 (same script); their difference is what N particles cost."""
     big, small = _peak_rss_mb(N, n_steps), _peak_rss_mb(10, n_steps)
-    n = L.N_STATES
+    n = lateral_16state.N_STATES
     per_particle = (3 * n * n + 2 * n * 5 + 2 * n + 2 * 5 + 5) * 8     # x, P, F, H, G, θ (bytes)
     return dict(peak_rss_mb=big, peak_rss_N10_mb=small, particles_mb=big - small,
                 bank_arrays_mb=N * per_particle / 2 ** 20)
@@ -418,7 +412,8 @@ def main_payload(quick: bool, progress=print, repeats: int | None = None, smoke:
         memory_N10000=mem, quick=quick, smoke=smoke,
         sizes=sizes, repeats=repeats,
         spread=spread, gain_settling=settling,
-        setup=dict(states=L.N_STATES, channels=len(L.CHANNELS), dt_s=settings.dt_s,
+        setup=dict(states=lateral_16state.N_STATES, channels=len(lateral_16state.CHANNELS),
+                   dt_s=settings.dt_s,
                    speed_kmh=settings.speed_kmh, ess_fraction=settings.ess_fraction,
                    tempering_steps=settings.tempering_steps,
                    working_delta=settings.working_delta, paper_delta=settings.paper_delta,

@@ -3,9 +3,10 @@
 The engine issue asked whether fewer resamplings (the dominant start-up cost: each one moves
 every particle and so pays N discretisations) can be had without losing accuracy.  This script
 measures, on the chapter's own records (``simulate_lateral`` at the chapter's defaults, seeds
-0..R−1) and its own filter set-up (:func:`railpaper.experiments.rbpf_parameter_estimation.experiment.lateral_rbpf`),
-for a few settings of the two levers — the ESS threshold that triggers resampling and the
-length of the likelihood tempering — per setting:
+0..R−1) and its own filter set-up
+(:func:`railpaper.experiments.rbpf_parameter_estimation.lateral.lateral_rbpf`), for a few
+settings of the two levers — the ESS threshold that triggers resampling and the length of the
+likelihood tempering — per setting:
 
 * resamplings over the record (median over records) and the run time per step (median);
 * the rate of records on which every parameter stays within 5 % from step 350 (the paper's
@@ -30,7 +31,7 @@ import time
 import numpy as np
 
 from railpaper.experiments.lateral_vehicle import RecordSettings
-from railpaper.experiments.rbpf_parameter_estimation import experiment as E
+from railpaper.experiments.rbpf_parameter_estimation import experiment
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.experiments.rbpf_parameter_estimation.toy import gaussian_covers
@@ -61,7 +62,7 @@ def run_setting(records: list, settings: Settings, fixed: dict, theta: np.ndarra
 
 
 def main(n_records: int = 10) -> list[dict]:
-    settings = E.SPEC.resolve({}, False)
+    settings = experiment.SPEC.resolve({}, False)
     fixed, theta = study.vehicle()
     records = []
     for seed in range(n_records):
@@ -95,7 +96,7 @@ def paired_rows(first_seed: int, n_records: int, thresholds=PAIRED_THRESHOLDS) -
     5 % from step 350 on, how many of the 5 parameters its 90 % interval (mean ± 1.645 sd)
     covers at the last step, the largest final |relative error|, the resamplings and the
     seconds of the run.  Chapter defaults otherwise, one thread."""
-    settings = E.SPEC.resolve({}, False)
+    settings = experiment.SPEC.resolve({}, False)
     fixed, theta = study.vehicle()
     rows = []
     with one_thread():

@@ -23,10 +23,9 @@ import time
 import numba
 import numpy as np
 
-from railpaper.engine.batch_expm import zoh_stack
-from railpaper.engine.sparse_zoh import BLOCK, multiply_adds, term_counts, zoh_sparse
+from railpaper.engine import ZOH_BLOCK, term_counts, zoh_multiply_adds, zoh_sparse, zoh_stack
 from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.timing import LoadLog, interleaved, paired_ratio, summary
 
 CALLS = 15
@@ -35,9 +34,9 @@ DENSE_MULTIPLY_ADDS = 6 * 18 ** 3   # expm_stack: 5 products (Paterson–Stockme
 
 def lateral_stack(n_particles: int, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     fixed, theta = vehicle()
-    A0, Ak = L.affine_terms(fixed, 300 / 3.6)
+    A0, Ak = lateral_16state.affine_terms(fixed, 300 / 3.6)
     factors = np.random.default_rng(seed).uniform(0.5, 1.7, (n_particles, 5))
-    return L.a_of_theta(A0, Ak, theta * factors), L.input_matrix()
+    return lateral_16state.a_of_theta(A0, Ak, theta * factors), lateral_16state.input_matrix()
 
 
 def median_call_s(f, A, B, dt) -> float:
@@ -69,10 +68,11 @@ def main(n_particles: int = 1000, alternations: int = 7) -> dict:
             ratio_dense_over_sparse=paired_ratio(t["dense"], t["sparse"]))
         log.sample(f"after {threads} thread(s)")
     # per particle, each block runs its largest K (its lanes are masked, not skipped)
-    blocks = [K[i:i + BLOCK].max() for i in range(0, len(K), BLOCK)]
+    blocks = [K[i:i + ZOH_BLOCK].max() for i in range(0, len(K), ZOH_BLOCK)]
     out["multiply_adds_per_particle"] = dict(
-        sparse_own_terms=float(np.mean([multiply_adds(nnz, 16, 2, k, q) for k, q in zip(K, s)])),
-        sparse_as_run=float(np.mean([multiply_adds(nnz, 16, 2, k) for k in blocks])),
+        sparse_own_terms=float(np.mean([zoh_multiply_adds(nnz, 16, 2, k, q)
+                                        for k, q in zip(K, s)])),
+        sparse_as_run=float(np.mean([zoh_multiply_adds(nnz, 16, 2, k) for k in blocks])),
         dense=DENSE_MULTIPLY_ADDS, nnz=nnz,
         terms=dict(min=int(K.min()), max=int(K.max()), mean=float(K.mean())),
         squarings_max=int(s.max()))

@@ -34,30 +34,47 @@ pass, for models affine in θ such as both toys),
 of models), :mod:`~railpaper.engine.particles` (weights, resampling, Liu–West),
 :mod:`~railpaper.engine.mcmc` (adaptive Metropolis on the Kalman likelihood) and
 :mod:`~railpaper.engine.crlb` (Fisher information, Cramér–Rao bound).
+
+This module is the engine's only door: outside ``railpaper/engine/`` the package imports every
+name from here, never from a submodule (``tests/test_layers.py`` fails on such an import).  Two
+names are renamed on the way out: the cost models ``multiply_adds`` of the Kalman bank and of
+the sparse ZOH are ``bank_multiply_adds`` and ``zoh_multiply_adds``, and the sparse ZOH's
+block length ``BLOCK`` is ``ZOH_BLOCK``.
 """
 
+from railpaper.engine.batch_expm import zoh_stack
 from railpaper.engine.changepoint import (ChangeLikelihoods, ChangePosterior,
                                          change_likelihoods, change_posterior)
 from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.grid_posterior import GridPosterior, grid_posterior
-from railpaper.engine.ibis import IBISRun, run_ibis
-from railpaper.engine.kalman import predict, update
-from railpaper.engine.kalman_bank import kalman_run, kalman_step
+from railpaper.engine.ibis import IBISRun, credible_interval_covers, run_ibis
+from railpaper.engine.kalman import LOG_2PI, predict, update
+from railpaper.engine.kalman_bank import kalman_run, kalman_step, measurement_pattern
+from railpaper.engine.kalman_bank import multiply_adds as bank_multiply_adds
+from railpaper.engine.kernel_arrays import kernel_array
 from railpaper.engine.linear_gaussian import (AffineSystem, LinearGaussianBatch,
                                               LinearGaussianSystem)
 from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
-from railpaper.engine.particles import liu_west_move, normalise_log_weights, systematic_resample
+from railpaper.engine.particles import (effective_sample_size, liu_west_move,
+                                        normalise_log_weights, systematic_resample,
+                                        weighted_mean_cov)
 from railpaper.engine.qgrbpf import QuasiGaussianRBPF, run_qgrbpf
-from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, run_filter,
-                                   run_rbpf)
+from railpaper.engine.rbpf import (FilterRun, RaoBlackwellisedPF, StepEstimate, mixture_moments,
+                                   run_filter, run_rbpf)
 from railpaper.engine.residual_alarms import (Innovations, cusum_variance, first_alarm,
                                               glr_mean_shift, whitened_innovations)
+from railpaper.engine.sparse_zoh import BLOCK as ZOH_BLOCK
+from railpaper.engine.sparse_zoh import AffineZOH, affine_balance, term_counts, zoh_sparse
+from railpaper.engine.sparse_zoh import multiply_adds as zoh_multiply_adds
 
-__all__ = ["AffineSystem", "ChangeLikelihoods", "ChangePosterior", "FilterRun", "GridPosterior",
-           "IBISRun", "Innovations", "LinearGaussianBatch", "LinearGaussianSystem",
-           "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate", "adaptive_metropolis",
-           "change_likelihoods", "change_posterior", "crlb_std", "cusum_variance", "first_alarm",
-           "fisher_information", "glr_mean_shift", "grid_posterior", "kalman_log_posterior",
-           "kalman_run", "kalman_step", "liu_west_move", "normalise_log_weights", "predict",
-           "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf", "systematic_resample", "update",
-           "whitened_innovations"]
+__all__ = ["AffineSystem", "AffineZOH", "ChangeLikelihoods", "ChangePosterior", "FilterRun",
+           "GridPosterior", "IBISRun", "Innovations", "LOG_2PI", "LinearGaussianBatch",
+           "LinearGaussianSystem", "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate",
+           "ZOH_BLOCK", "adaptive_metropolis", "affine_balance", "bank_multiply_adds",
+           "change_likelihoods", "change_posterior", "credible_interval_covers", "crlb_std",
+           "cusum_variance", "effective_sample_size", "first_alarm", "fisher_information",
+           "glr_mean_shift", "grid_posterior", "kalman_log_posterior", "kalman_run", "kalman_step",
+           "kernel_array", "liu_west_move", "measurement_pattern", "mixture_moments",
+           "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf",
+           "systematic_resample", "term_counts", "update", "weighted_mean_cov",
+           "whitened_innovations", "zoh_multiply_adds", "zoh_sparse", "zoh_stack"]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from railpaper.engine.kernel_arrays import kernel_array
+from railpaper.engine import kernel_array
 
 
 @dataclass(frozen=True)

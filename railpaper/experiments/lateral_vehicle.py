@@ -24,7 +24,7 @@ from railpaper import track
 from railpaper.data import load_quantities
 from railpaper.discretise import zoh
 from railpaper.experiments.base import Parameter
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.paths import DATA_DIR
 
 #: The vehicle's data (paper 003 prints none: a project choice, sources in the file).
@@ -103,8 +103,10 @@ class LateralRecord:
 
 def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:
     """Fixed quantities and true θ from ``data/rbpf-parameter-estimation/parameters.toml``."""
-    q = load_quantities(params_path or VEHICLE_FILE, L.FIXED_KEYS + L.PARAM_NAMES)
-    return {k: q[k].value for k in L.FIXED_KEYS}, np.array([q[k].value for k in L.PARAM_NAMES])
+    q = load_quantities(params_path or VEHICLE_FILE,
+                        lateral_16state.FIXED_KEYS + lateral_16state.PARAM_NAMES)
+    return ({k: q[k].value for k in lateral_16state.FIXED_KEYS},
+            np.array([q[k].value for k in lateral_16state.PARAM_NAMES]))
 
 
 def noise_std(settings: RecordSettings) -> np.ndarray:
@@ -153,16 +155,17 @@ def simulate_lateral(settings: RecordSettings, fixed: dict, theta: np.ndarray, s
     noise (generator ``[seed, 7]``), and the filters' input u_k = ẏ_t(t_{k−1}) held over a step."""
     v = settings.speed_kmh / 3.6
     dq = track_velocity(settings, fixed, seed)
-    x = L.simulate_truth(fixed, theta, v, settings.dt_s / settings.truth_substeps, dq[:-1])
-    H = L.measurement_matrix(L.build_A_direct(fixed, theta, v))
+    x = lateral_16state.simulate_truth(fixed, theta, v, settings.dt_s / settings.truth_substeps,
+                                       dq[:-1])
+    H = lateral_16state.measurement_matrix(lateral_16state.build_A_direct(fixed, theta, v))
     return sampled_record(settings, seed, x, H, dq)
 
 
 def filter_noise(fixed, theta, settings: RecordSettings, input_var) -> tuple[np.ndarray, np.ndarray]:
     """Q = Γ diag(input_var) Γᵀ (+1e-14 I) at the nominal θ, R = diag(noise²)."""
-    _, G = zoh(L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6), L.input_matrix(),
-               settings.dt_s)
-    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(L.N_STATES)
+    _, G = zoh(lateral_16state.build_A_direct(fixed, theta, settings.speed_kmh / 3.6),
+               lateral_16state.input_matrix(), settings.dt_s)
+    Q = G @ np.diag(input_var) @ G.T + 1e-14 * np.eye(lateral_16state.N_STATES)
     return Q, np.diag(noise_std(settings) ** 2)
 
 
@@ -179,8 +182,8 @@ def filter_system(settings: RecordSettings, fixed: dict, theta: np.ndarray,
     (:func:`filter_noise`); the ZOH's balancing is that of ``theta_ref`` (chapter 003: the prior
     box's :func:`prior_centre`; it changes only the rounding)."""
     Q, R = filter_noise(fixed, theta, settings, record.du_var_m2ps2)
-    return L.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s, Q, R,
-                            theta_ref=theta_ref)
+    return lateral_16state.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s, Q, R,
+                                          theta_ref=theta_ref)
 
 
 __all__ = ["LateralRecord", "RecordSettings", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise",

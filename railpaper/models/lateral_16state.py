@@ -25,10 +25,8 @@ import numba
 import numpy as np
 from scipy.linalg import expm
 
-from railpaper.engine.kernel_arrays import kernel_array
-from railpaper.engine.sparse_zoh import AffineZOH, affine_balance
 from railpaper.discretise import simulate_zoh, zoh
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
+from railpaper.engine import AffineZOH, LinearGaussianBatch, affine_balance, kernel_array
 
 STATE_NAMES = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
                "vyb", "yb", "vpsib", "psib", "vybd", "ybd", "d1", "d2")

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from railpaper import contact
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 
 @dataclass(frozen=True)
@@ -76,8 +76,9 @@ class TruthPlant:
     def __init__(self, fixed: dict, theta, speed_mps: float, wheel_rail: WheelRail):
         self.fixed, self.theta = dict(fixed), np.asarray(theta, float)
         self.v, self.wr = float(speed_mps), wheel_rail
-        self.A_free = L.build_A_direct(dict(fixed, f11=0.0, f22=0.0), self.theta, self.v)
-        self.B = L.input_matrix()
+        self.A_free = lateral_16state.build_A_direct(dict(fixed, f11=0.0, f22=0.0), self.theta,
+                                                     self.v)
+        self.B = lateral_16state.input_matrix()
 
     def creepages(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(ξ_x, ξ_y), each (..., 2) for the two wheelsets (right wheel), 1, of states (..., 16)."""
@@ -112,8 +113,9 @@ class TruthPlant:
         """The five channels (..., 5) of :data:`~railpaper.models.lateral_16state.CHANNELS` at
         states x: the four lateral accelerations (m/s², from the nonlinear forces; the input
         does not enter them) and the bogie yaw rate (rad/s)."""
-        acc = self.derivative(x, np.zeros(x.shape[:-1] + (2,)))[..., list(L.ACC_ROWS)]
-        return np.concatenate([acc, x[..., L.YAW_RATE_STATE:L.YAW_RATE_STATE + 1]], axis=-1)
+        acc = self.derivative(x, np.zeros(x.shape[:-1] + (2,)))[..., list(lateral_16state.ACC_ROWS)]
+        yaw = lateral_16state.YAW_RATE_STATE
+        return np.concatenate([acc, x[..., yaw:yaw + 1]], axis=-1)
 
 
 def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fine: np.ndarray,
@@ -141,7 +143,7 @@ def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fin
     plant = TruthPlant(fixed, theta, speed_mps, wheel_rail)
     u_fine = np.asarray(u_fine, float)
     h = float(dt_fine_s)
-    x = np.zeros((len(u_fine) + 1, L.N_STATES))
+    x = np.zeros((len(u_fine) + 1, lateral_16state.N_STATES))
     f = plant.derivative
     for k, u in enumerate(u_fine):
         z = x[k]

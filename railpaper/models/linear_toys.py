@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from railpaper.discretise import propagate
-from railpaper.engine.linear_gaussian import AffineSystem, LinearGaussianBatch
+from railpaper.engine import AffineSystem, LinearGaussianBatch
 
 PAPER004_G = np.array([[-1.0, 0.38], [-1.5, 1.0]])
 PAPER004_H = np.array([[1.0, -0.38], [0.5, 0.7]])

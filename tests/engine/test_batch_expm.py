@@ -18,7 +18,7 @@ import pytest
 from scipy.linalg import expm, matrix_balance
 
 from railpaper.engine.sparse_zoh import KMAX, TOL, term_counts, zoh_affine, zoh_sparse
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 DT = 1e-3          # s, the chapter's step
 SPEED = 300 / 3.6  # m/s
@@ -28,8 +28,8 @@ SPEED = 300 / 3.6  # m/s
 def lateral():
     from railpaper.experiments.rbpf_parameter_estimation.lateral import vehicle
     fixed, theta = vehicle()
-    A0, Ak = L.affine_terms(fixed, SPEED)
-    return A0, Ak, theta, L.input_matrix()
+    A0, Ak = lateral_16state.affine_terms(fixed, SPEED)
+    return A0, Ak, theta, lateral_16state.input_matrix()
 
 
 def rel(a, b):
@@ -108,7 +108,7 @@ def taylor_then_square(X, K, s):
 
 def lateral_stack(lateral, factors):
     A0, Ak, theta, _ = lateral
-    return L.a_of_theta(A0, Ak, theta * factors)
+    return lateral_16state.a_of_theta(A0, Ak, theta * factors)
 
 
 # ----------------------------------------------------------------------------- parity with scipy
@@ -135,7 +135,7 @@ def test_far_outside_the_box_matches_scipy(lateral, factor):
 
 def test_one_matrix_and_per_matrix_B(lateral):
     A0, Ak, theta, B = lateral
-    A = L.a_of_theta(A0, Ak, theta)
+    A = lateral_16state.a_of_theta(A0, Ak, theta)
     F, G = zoh_sparse(A, B, DT)
     Fr, Gr = scipy_zoh(A[0], B, DT)
     assert F.shape == (1, 16, 16) and G.shape == (1, 16, 2)
@@ -297,7 +297,7 @@ def test_affine_zoh_from_theta_matches_scipy_and_the_built_matrix(lateral):
     rng = np.random.default_rng(7)
     for factors in (rng.uniform(0.5, 1.7, (300, 5)), 100 * rng.uniform(0.8, 1.25, (20, 5))):
         th = theta * factors
-        A = L.a_of_theta(A0, Ak, th)
+        A = lateral_16state.a_of_theta(A0, Ak, th)
         F, G = zoh_affine(th, A0, Ak, B, DT)
         Fr, Gr = scipy_zoh(A, B, DT)
         assert rel(F, Fr).max() < 1e-13 and rel(G, Gr).max() < 1e-13
@@ -310,7 +310,7 @@ def test_affine_zoh_lane_independence_and_errors(lateral):
     is refused with one message."""
     A0, Ak, theta, B = lateral
     th = theta * np.random.default_rng(8).uniform(0.5, 1.7, (70, 5))
-    d = balance_scale(L.a_of_theta(A0, Ak, theta)[0], B)
+    d = balance_scale(lateral_16state.a_of_theta(A0, Ak, theta)[0], B)
     F, G = zoh_affine(th, A0, Ak, B, DT, scale=d)
     perm = np.random.default_rng(9).permutation(70)
     Fp, Gp = zoh_affine(th[perm], A0, Ak, B, DT, scale=d)
@@ -331,14 +331,15 @@ def test_lateral_system_bits_do_not_depend_on_the_order_of_calls(lateral):
     Q, R = 1e-12 * np.eye(16), 1e-6 * np.eye(5)
     rng = np.random.default_rng(11)
     a, b = theta * rng.uniform(0.5, 1.7, (40, 5)), theta * rng.uniform(0.5, 1.7, (40, 5))
-    s1 = L.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
-    s2 = L.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
+    s1 = lateral_16state.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
+    s2 = lateral_16state.lateral_system(fixed, SPEED, DT, Q, R, theta_ref=1.1 * theta)
     first_a = s1(a)
     s2(b)                                                   # another filter called first
     second_a = s2(a[::-1])
     assert np.array_equal(first_a.F, second_a.F[::-1])
     assert np.array_equal(first_a.H, second_a.H[::-1])
-    A = L.a_of_theta(*L.affine_terms(fixed, SPEED), a)
-    Fr, Gr = scipy_zoh(A, L.input_matrix(), DT)
+    A = lateral_16state.a_of_theta(*lateral_16state.affine_terms(fixed, SPEED), a)
+    Fr, Gr = scipy_zoh(A, lateral_16state.input_matrix(), DT)
     assert rel(first_a.F, Fr).max() < 1e-13 and rel(first_a.B, Gr).max() < 1e-13
-    np.testing.assert_allclose(first_a.H, L.measurement_matrix(A), rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(first_a.H, lateral_16state.measurement_matrix(A),
+                               rtol=1e-14, atol=1e-14)

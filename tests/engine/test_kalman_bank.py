@@ -17,7 +17,7 @@ from railpaper.engine.kalman_bank import (block_size, kalman_run, kalman_step,
                                           measurement_pattern)
 from railpaper.engine.linear_gaussian import LinearGaussianBatch
 from railpaper.engine.rbpf import RaoBlackwellisedPF, run_rbpf
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 
 def random_stable(rng, n, scale=1.0):
@@ -91,10 +91,10 @@ def lateral():
 def test_expm_stack_matches_scipy_on_the_lateral_model_and_random_matrices(lateral):
     fixed, theta, v, dt = lateral
     rng = np.random.default_rng(3)
-    A0, Ak = L.affine_terms(fixed, v)
-    A = L.a_of_theta(A0, Ak, theta * rng.uniform(0.5, 1.7, (70, 5)))
-    F, G = zoh_stack(A, L.input_matrix(), dt)
-    Fr, Gr = zoh(A, L.input_matrix(), dt)          # scipy expm, stacked
+    A0, Ak = lateral_16state.affine_terms(fixed, v)
+    A = lateral_16state.a_of_theta(A0, Ak, theta * rng.uniform(0.5, 1.7, (70, 5)))
+    F, G = zoh_stack(A, lateral_16state.input_matrix(), dt)
+    Fr, Gr = zoh(A, lateral_16state.input_matrix(), dt)          # scipy expm, stacked
     assert rel(F, Fr) < 1e-12 and rel(G, Gr) < 1e-12
     for norm in (0.01, 1.0, 30.0):                  # no squaring ... several squarings
         M = rng.standard_normal((9, 7, 7))
@@ -103,8 +103,8 @@ def test_expm_stack_matches_scipy_on_the_lateral_model_and_random_matrices(later
         for i in range(9):
             assert rel(E[i], expm(M[i])) < 1e-10
     A1 = A[0]
-    F1, G1 = zoh(A1, L.input_matrix(), dt)          # the library's scalar ZOH (scipy)
-    F2, G2 = zoh_stack(A1[None], L.input_matrix(), dt)
+    F1, G1 = zoh(A1, lateral_16state.input_matrix(), dt)          # the library's scalar ZOH (scipy)
+    F2, G2 = zoh_stack(A1[None], lateral_16state.input_matrix(), dt)
     assert rel(F2[0], F1) < 1e-12 and rel(G2[0], G1) < 1e-12
 
 
@@ -118,18 +118,18 @@ def lateral_record(lateral):
     """``make(scheme) -> (system, ys, u, theta0, options)``: 120 steps of a lateral record."""
     fixed, theta, v, dt = lateral
     rng = np.random.default_rng(5)
-    A = L.build_A_direct(fixed, theta, v)
+    A = lateral_16state.build_A_direct(fixed, theta, v)
     K = 120
     u = 1e-3 * rng.standard_normal((K, 2))
-    Fd, Gd = zoh(A, L.input_matrix(), dt)
-    H = L.measurement_matrix(A)
+    Fd, Gd = zoh(A, lateral_16state.input_matrix(), dt)
+    H = lateral_16state.measurement_matrix(A)
     Q = Gd @ Gd.T * 1e-6 + 1e-14 * np.eye(16)
     R = np.diag([0.1, 0.1, 0.1, 0.01, 0.001]) ** 2
     x, ys = np.zeros(16), []
     for k in range(K):
         x = Fd @ x + Gd @ u[k]
         ys.append(H @ x + np.sqrt(np.diag(R)) * rng.standard_normal(5))
-    system = L.lateral_system(fixed, v, dt, Q, R)
+    system = lateral_16state.lateral_system(fixed, v, dt, Q, R)
     theta0 = theta * np.random.default_rng(1).uniform(0.5, 1.7, (48, 5))
 
     def make(scheme):

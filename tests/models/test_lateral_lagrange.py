@@ -17,12 +17,12 @@ scaled by 1.01 is caught by the same comparison.
 import numpy as np
 import pytest
 
-from railpaper.experiments.rbpf_parameter_estimation import experiment as E
+from railpaper.experiments.rbpf_parameter_estimation import experiment
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 FIXED, THETA = study.vehicle()
-PRIOR = E.SPEC.resolve({}, False)
+PRIOR = experiment.SPEC.resolve({}, False)
 
 #: The paper's state vector X(t), typed from its text (before Eq. 10).
 PAPER_STATE = ("vyw1", "yw1", "vpsiw1", "psiw1", "vyw2", "yw2", "vpsiw2", "psiw2",
@@ -121,13 +121,13 @@ def thetas():
 @pytest.mark.parametrize("speed_kmh", [300.0, 200.0])
 @pytest.mark.parametrize("which", [0, 1, 2])
 def test_A_equals_lagrange_assembly(speed_kmh, which):
-    assert L.STATE_NAMES == PAPER_STATE
+    assert lateral_16state.STATE_NAMES == PAPER_STATE
     v, theta = speed_kmh / 3.6, thetas()[which]
     ref = lagrange_A(FIXED, theta, v)
-    assert mismatch(L.build_A_direct(FIXED, theta, v), ref) == []
-    A0, Ak = L.affine_terms(FIXED, v)
-    assert mismatch(L.a_of_theta(A0, Ak, theta)[0], ref) == []
-    H = L.measurement_matrix(L.build_A_direct(FIXED, theta, v))
+    assert mismatch(lateral_16state.build_A_direct(FIXED, theta, v), ref) == []
+    A0, Ak = lateral_16state.affine_terms(FIXED, v)
+    assert mismatch(lateral_16state.a_of_theta(A0, Ak, theta)[0], ref) == []
+    H = lateral_16state.measurement_matrix(lateral_16state.build_A_direct(FIXED, theta, v))
     acc_rows = [PAPER_STATE.index(s) for s in ("vyw1", "vyw2", "vyb", "vybd")]
     np.testing.assert_allclose(H[:4], ref[acc_rows], rtol=1e-9, atol=1e-13 * np.abs(ref).max())
     assert H[4].tolist() == np.eye(16)[PAPER_STATE.index("vpsib")].tolist()
@@ -136,13 +136,13 @@ def test_A_equals_lagrange_assembly(speed_kmh, which):
 def test_B_is_minus_track_velocity_into_d():
     B = np.zeros((16, 2))
     B[PAPER_STATE.index("d1"), 0] = B[PAPER_STATE.index("d2"), 1] = -1.0   # Eqs. (8)-(9)
-    assert L.input_matrix().tolist() == B.tolist()
+    assert lateral_16state.input_matrix().tolist() == B.tolist()
 
 
 def test_every_wrong_sign_or_factor_is_caught():
     """The comparison is sharp: flip any one nonzero entry, or scale it by 1.01 -> mismatch."""
     v = 300 / 3.6
-    A = L.build_A_direct(FIXED, THETA, v)
+    A = lateral_16state.build_A_direct(FIXED, THETA, v)
     ref = lagrange_A(FIXED, THETA, v)
     entries = np.argwhere(A != 0)
     assert len(entries) == 43

@@ -8,29 +8,28 @@ from scipy.linalg import expm
 
 from railpaper.data import load_quantities
 from railpaper.discretise import zoh
-from railpaper.engine.crlb import crlb_std, fisher_information
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
-from railpaper.engine.rbpf import run_rbpf
-from railpaper.models import lateral_16state as L
+from railpaper.engine import LinearGaussianBatch, crlb_std, fisher_information, run_rbpf
+from railpaper.models import lateral_16state
 from railpaper.paths import DATA_DIR
 
 PARAMS = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
-FIXED = {k: PARAMS[k].value for k in L.FIXED_KEYS}
-THETA = np.array([PARAMS[k].value for k in L.PARAM_NAMES])
+FIXED = {k: PARAMS[k].value for k in lateral_16state.FIXED_KEYS}
+THETA = np.array([PARAMS[k].value for k in lateral_16state.PARAM_NAMES])
 V = 300 / 3.6
 
 
 def test_affine_equals_direct_build():
-    A0, Ak = L.affine_terms(FIXED, V)
+    A0, Ak = lateral_16state.affine_terms(FIXED, V)
     rng = np.random.default_rng(0)
     thetas = THETA * rng.uniform(0.3, 2.0, (6, 5))
-    affine = L.a_of_theta(A0, Ak, thetas)
+    affine = lateral_16state.a_of_theta(A0, Ak, thetas)
     for t, A in zip(thetas, affine):
-        np.testing.assert_allclose(A, L.build_A_direct(FIXED, t, V), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(A, lateral_16state.build_A_direct(FIXED, t, V),
+                                   rtol=1e-9, atol=1e-9)
 
 
 def test_equations_by_hand():
-    A = L.build_A_direct(FIXED, THETA, V)
+    A = lateral_16state.build_A_direct(FIXED, THETA, V)
     csy, lam, kpy, ksy, csaly = THETA
     # Eq. (2): yaw of the front wheelset, coefficient of d1
     assert A[2, 14] == pytest.approx(-2 * FIXED["f11"] * lam * FIXED["l0"] / FIXED["r0"]
@@ -45,15 +44,15 @@ def test_equations_by_hand():
 
 
 def test_zoh_matches_scipy_and_stable_at_300():
-    A = L.build_A_direct(FIXED, THETA, V)
-    B = L.input_matrix()
+    A = lateral_16state.build_A_direct(FIXED, THETA, V)
+    B = lateral_16state.input_matrix()
     F, G = zoh(A, B, 1e-3)
     M = np.zeros((18, 18))
     M[:16, :16], M[:16, 16:] = A, B
     E = expm(M * 1e-3)
     np.testing.assert_allclose(F, E[:16, :16], atol=1e-13)
     np.testing.assert_allclose(G, E[:16, 16:], atol=1e-13)
-    assert L.least_damped(A)[0] < 0
+    assert lateral_16state.least_damped(A)[0] < 0
 
 
 def test_rbpf_at_truth_equals_filterpy_kalman():
@@ -61,7 +60,7 @@ def test_rbpf_at_truth_equals_filterpy_kalman():
     rng = np.random.default_rng(1)
     Q = 1e-10 * np.eye(16)
     R = np.diag([0.1, 0.1, 0.1, 0.01, 0.001]) ** 2
-    system = L.lateral_system(FIXED, V, 1e-3, Q, R)
+    system = lateral_16state.lateral_system(FIXED, V, 1e-3, Q, R)
     s = system(THETA[None])
     K = 60
     u = rng.standard_normal((K, 2)) * 0.04
@@ -101,7 +100,7 @@ def test_crlb_matches_closed_form_ar1():
 
 
 def test_ekf_model_derivatives_match_finite_differences():
-    model = L.ekf_model(FIXED, V, 1e-3)
+    model = lateral_16state.ekf_model(FIXED, V, 1e-3)
     F, G, H, dF, dG, dH = model(THETA)
     for k in (0, 2, 4):
         h = 1e-6 * THETA[k]
@@ -120,14 +119,15 @@ def test_lateral_measurement_alone_is_the_systems_H_and_R():
     for bit, the H and R of ``system(θ)``, and H's acceleration rows are those of A(θ) from
     :func:`railpaper.models.lateral_16state.measurement_matrix`."""
     R = np.diag([0.1, 0.1, 0.1, 0.01, 0.001]) ** 2
-    system = L.lateral_system(FIXED, V, 1e-3, 1e-10 * np.eye(16), R)
+    system = lateral_16state.lateral_system(FIXED, V, 1e-3, 1e-10 * np.eye(16), R)
     theta = THETA * np.random.default_rng(4).uniform(0.5, 1.7, (7, 5))
     H, R_alone = system.measurement(theta)
     s = system(theta)
     assert np.array_equal(H, s.H) and np.array_equal(R_alone, s.R)
-    A0, Ak = L.affine_terms(FIXED, V)
-    np.testing.assert_allclose(H, L.measurement_matrix(L.a_of_theta(A0, Ak, theta)),
-                               rtol=1e-13, atol=1e-13)
+    A0, Ak = lateral_16state.affine_terms(FIXED, V)
+    np.testing.assert_allclose(
+        H, lateral_16state.measurement_matrix(lateral_16state.a_of_theta(A0, Ak, theta)),
+        rtol=1e-13, atol=1e-13)
 
 
 def test_truth_with_change_equals_the_switching_ode_integrated_by_scipy():
@@ -138,10 +138,10 @@ def test_truth_with_change_equals_the_switching_ode_integrated_by_scipy():
     dt, K, c = 1e-4, 600, 300
     u = 0.02 * np.random.default_rng(6).standard_normal((K, 2))
     after = THETA.copy()
-    after[L.PARAM_NAMES.index("csaly")] = 0.0
-    x = L.simulate_truth_with_change(FIXED, THETA, after, c, V, dt, u)
-    A0, A1 = L.build_A_direct(FIXED, THETA, V), L.build_A_direct(FIXED, after, V)
-    Bc = L.input_matrix()
+    after[lateral_16state.PARAM_NAMES.index("csaly")] = 0.0
+    x = lateral_16state.simulate_truth_with_change(FIXED, THETA, after, c, V, dt, u)
+    A0, A1 = (lateral_16state.build_A_direct(FIXED, th, V) for th in (THETA, after))
+    Bc = lateral_16state.input_matrix()
     state = np.zeros(16)
     for k in range(K):
         A = A0 if k < c else A1
@@ -149,17 +149,18 @@ def test_truth_with_change_equals_the_switching_ode_integrated_by_scipy():
                           rtol=1e-11, atol=1e-16).y[:, -1]
         if k + 1 in (c, c + 1, K):
             np.testing.assert_allclose(x[k + 1], state, rtol=1e-7, atol=1e-13)
-    same = L.simulate_truth_with_change(FIXED, THETA, THETA, c, V, dt, u)
-    assert np.array_equal(same, L.simulate_truth(FIXED, THETA, V, dt, u))
+    same = lateral_16state.simulate_truth_with_change(FIXED, THETA, THETA, c, V, dt, u)
+    assert np.array_equal(same, lateral_16state.simulate_truth(FIXED, THETA, V, dt, u))
 
 
 def test_flange_contact_step_reads_the_relative_displacements():
     x = np.zeros((6, 16))
-    x[3, L.STATE_NAMES.index("d2")] = -0.008
-    x[4, L.STATE_NAMES.index("yw1")] = 0.02           # absolute, not relative to the track
-    assert L.flange_contact_step(x, 0.008) == 3
-    assert L.flange_contact_step(x, 0.009) == -1
+    x[3, lateral_16state.STATE_NAMES.index("d2")] = -0.008
+    x[4, lateral_16state.STATE_NAMES.index("yw1")] = 0.02   # absolute, not relative to the track
+    assert lateral_16state.flange_contact_step(x, 0.008) == 3
+    assert lateral_16state.flange_contact_step(x, 0.009) == -1
     with pytest.raises(ValueError, match="clearance_m"):
-        L.flange_contact_step(x, 0.0)
+        lateral_16state.flange_contact_step(x, 0.0)
     with pytest.raises(ValueError, match="change_step"):
-        L.simulate_truth_with_change(FIXED, THETA, THETA, 7, V, 1e-4, np.zeros((5, 2)))
+        lateral_16state.simulate_truth_with_change(FIXED, THETA, THETA, 7, V, 1e-4,
+                                                   np.zeros((5, 2)))

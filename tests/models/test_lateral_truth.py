@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from railpaper import contact
-from railpaper.models import lateral_16state as L
-from railpaper.models import lateral_truth as T
+from railpaper.models import lateral_16state
+from railpaper.models import lateral_truth
 
 F11, F22, N, MU = 1.2e7, 1.1e7, 62293.5, 0.4
 FIXED = dict(mw=1900.0, iwz=1100.0, mb=2600.0, ib=2000.0, mbd=19000.0, kpx=2.0e7, a=1.25,
@@ -101,23 +101,23 @@ def track_like_input(n: int, dt: float, seed: int = 3) -> np.ndarray:
 def test_linear_contact_reproduces_the_linear_model():
     dt = 1e-4
     u = track_like_input(3000, dt)
-    ref = L.simulate_truth(FIXED, THETA, V, dt, u)
-    x = T.simulate_truth(FIXED, THETA, V, dt, u, T.WheelRail.linear())
+    ref = lateral_16state.simulate_truth(FIXED, THETA, V, dt, u)
+    x = lateral_truth.simulate_truth(FIXED, THETA, V, dt, u, lateral_truth.WheelRail.linear())
     assert x.shape == ref.shape == (3001, 16)
     scale = np.abs(ref).max(axis=0)
     assert np.max(np.abs(x - ref) / scale) < 1e-8           # RK4 at |λ| h ≈ 0.015
-    plant = T.TruthPlant(FIXED, THETA, V, T.WheelRail.linear())
-    H = L.measurement_matrix(L.build_A_direct(FIXED, THETA, V))
+    plant = lateral_truth.TruthPlant(FIXED, THETA, V, lateral_truth.WheelRail.linear())
+    H = lateral_16state.measurement_matrix(lateral_16state.build_A_direct(FIXED, THETA, V))
     np.testing.assert_allclose(plant.measurements(ref), ref @ H.T, rtol=1e-9,
                                atol=1e-12 * np.abs(ref @ H.T).max())
 
 
 def test_nonlinear_plant_forces_by_hand():
-    wr = T.WheelRail(MU, N, 0.009)
-    plant = T.TruthPlant(FIXED, THETA, V, wr)
+    wr = lateral_truth.WheelRail(MU, N, 0.009)
+    plant = lateral_truth.TruthPlant(FIXED, THETA, V, wr)
     rng = np.random.default_rng(5)
     x = rng.standard_normal(16) * np.tile([0.05, 4e-3, 0.05, 2e-3], 4)
-    A_free = L.build_A_direct(dict(FIXED, f11=0.0, f22=0.0), THETA, V)
+    A_free = lateral_16state.build_A_direct(dict(FIXED, f11=0.0, f22=0.0), THETA, V)
     extra = plant.derivative(x, np.zeros(2)) - A_free @ x
     for iv, ipsi, ivpsi, idd in ((0, 3, 2, 14), (4, 7, 6, 15)):
         lam, l0, r0 = THETA[1], FIXED["l0"], FIXED["r0"]
@@ -132,8 +132,8 @@ def test_nonlinear_plant_forces_by_hand():
 
 
 def test_nonlinear_plant_is_linear_for_small_motion():
-    plant = T.TruthPlant(FIXED, THETA, V, T.WheelRail(MU, N, 0.009))
-    A = L.build_A_direct(FIXED, THETA, V)
+    plant = lateral_truth.TruthPlant(FIXED, THETA, V, lateral_truth.WheelRail(MU, N, 0.009))
+    A = lateral_16state.build_A_direct(FIXED, THETA, V)
     x = np.random.default_rng(2).standard_normal(16)
 
     def deviation(eps):

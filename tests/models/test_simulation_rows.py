@@ -10,21 +10,21 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from railpaper.data import load_quantities
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.models import linear_toys as toys
 from railpaper.paths import DATA_DIR
 
 PARAMS = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
-FIXED = {k: PARAMS[k].value for k in L.FIXED_KEYS}
-THETA = np.array([PARAMS[k].value for k in L.PARAM_NAMES])
+FIXED = {k: PARAMS[k].value for k in lateral_16state.FIXED_KEYS}
+THETA = np.array([PARAMS[k].value for k in lateral_16state.PARAM_NAMES])
 
 
 def test_lateral_truth_rows_follow_the_ode_with_held_input():
     v, dt = 300 / 3.6, 1e-4
     u = np.random.default_rng(0).standard_normal((5, 2)) * 0.01          # m/s
-    x = L.simulate_truth(FIXED, THETA, v, dt, u)
+    x = lateral_16state.simulate_truth(FIXED, THETA, v, dt, u)
     assert x.shape == (6, 16) and not x[0].any()
-    A, B = L.build_A_direct(FIXED, THETA, v), L.input_matrix()
+    A, B = lateral_16state.build_A_direct(FIXED, THETA, v), lateral_16state.input_matrix()
     ref = np.zeros(16)
     for k in range(len(u)):                   # x[k+1] is reached by holding u[k] over step k+1
         ref = solve_ivp(lambda t, z: A @ z + B @ u[k], (0, dt), ref, method="DOP853",

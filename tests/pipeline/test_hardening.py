@@ -25,7 +25,7 @@ import pytest
 from conftest import REPO, railpaper_cli
 
 from railpaper.experiments.base import ParameterError, check_sample_time
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 ROO, RBPF, PSO, QG = ("reduced-order-observer", "rbpf-parameter-estimation",
                       "partial-state-observer", "quasi-gaussian-rbpf")
@@ -222,7 +222,8 @@ CSV_CASES = {"csv-missing-columns", "csv-nan", "csv-text", "csv-non-monotonic-ti
 
 def _measurements(case: str) -> pd.DataFrame:
     """A 20-row record at dt_s = 1 ms, broken the way ``case`` says."""
-    frame = pd.DataFrame({"t_s": np.arange(20) * 1e-3, **{c: 0.1 for c in L.CHANNELS}})
+    frame = pd.DataFrame({"t_s": np.arange(20) * 1e-3,
+                          **{c: 0.1 for c in lateral_16state.CHANNELS}})
     if case == "csv-missing-columns":
         frame = frame.drop(columns=["acc_b_mps2"])
     elif case == "csv-nan":

@@ -63,8 +63,7 @@ def test_meminfo_is_read_and_the_check_names_the_numbers(tmp_path):
 PEAK = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from railpaper.engine.qgrbpf import QuasiGaussianRBPF
-    from railpaper.engine.rbpf import RaoBlackwellisedPF, run_filter
+    from railpaper.engine import QuasiGaussianRBPF, RaoBlackwellisedPF, run_filter
     from railpaper.models.linear_toys import paper004_system, simulate_paper004
     kind, N = sys.argv[1], int(sys.argv[2])
     rng = np.random.default_rng(0)

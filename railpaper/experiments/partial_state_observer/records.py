@@ -33,8 +33,8 @@ The numbers of a run (wheelsets 1-4; ``win``: t ≥ the error window start, 1 s)
 * ``relative_rms_error``: ``mean_i RMS_win(ẑ_i − z_i) / RMS_win(z_i)`` (tracking);
 * ``rms_error_m``: ``RMS_{i, win}(ẑ_i − z_i)`` (the estimate's oscillation about the truth).
 
-Seeds are simulated :data:`SEED_GROUP` at a time (one chunk of records; memory about 0.3 GB at
-8 s runs).  A record's numbers do not depend on its chunk: every matrix product over runs has
+Seeds are simulated :data:`SEED_GROUP` at a time (one chunk of records; the group size bounds
+the memory).  A record's numbers do not depend on its chunk: every matrix product over runs has
 at least two rows, because a chunk of one seed is simulated as that seed twice
 (:func:`batch_seeds`).  OpenBLAS multiplies a one-row matrix (``gemv``) with another rounding than
 a matrix of several rows (``gemm``), whose rows do not depend on how many there are; with the
@@ -137,7 +137,7 @@ def run_measures(t_s, z_true, z_est, fixed_threshold_m, fraction: float,
 
 
 PROFILE_DX_M = 0.05
-SEED_GROUP = 10               # seeds simulated together (memory ~ 0.3 GB per group at 8 s)
+SEED_GROUP = 10               # seeds simulated together (one chunk; bounds its memory)
 KALMAN_SEEDS = 20             # the Kalman baseline (an illustration, no claim) runs on these many
 
 

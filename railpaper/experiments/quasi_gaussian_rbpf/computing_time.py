@@ -31,9 +31,7 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.kalman_bank import multiply_adds
-from railpaper.engine.particles import systematic_resample
-from railpaper.engine.rbpf import run_filter
+from railpaper.engine import bank_multiply_adds, run_filter, systematic_resample
 from railpaper.experiments.quasi_gaussian_rbpf.spec import Settings
 from railpaper.stats import median_interval
 from railpaper.threads import one_thread
@@ -65,7 +63,7 @@ def operations_per_step(name: str, n_particles: int, n: int, p: int, d: int, m: 
     """
     N = n_particles
     log2 = int(np.ceil(np.log2(max(N, 2))))
-    common = {"kalman bank": N * multiply_adds(n, p, m), "weights": 5 * N,
+    common = {"kalman bank": N * bank_multiply_adds(n, p, m), "weights": 5 * N,
               "parameter moments": N * (2 * d + d * d), "state moments": 5 * N * n,
               "new matrices": N * n * n}
     copies = N * (d + n + n * n)

@@ -34,9 +34,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.grid_posterior import grid_posterior
-from railpaper.engine.qgrbpf import QuasiGaussianRBPF
-from railpaper.engine.rbpf import RaoBlackwellisedPF, run_filter
+from railpaper.engine import QuasiGaussianRBPF, RaoBlackwellisedPF, grid_posterior, run_filter
 from railpaper.experiments.base import (
     ParameterError,
     check_banks,

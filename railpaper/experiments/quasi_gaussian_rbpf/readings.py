@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.data import read_toml
-from railpaper.engine.grid_posterior import grid_posterior
+from railpaper.engine import grid_posterior
 from railpaper.experiments.quasi_gaussian_rbpf.result import Reading, ReadingsStudy
 from railpaper.experiments.quasi_gaussian_rbpf.spec import PAPER_STEPS, PARAMS, Settings
 from railpaper.models.linear_toys import paper004_system, simulate_paper004

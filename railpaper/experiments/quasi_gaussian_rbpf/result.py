@@ -13,8 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.grid_posterior import GridPosterior
-from railpaper.engine.rbpf import FilterRun
+from railpaper.engine import FilterRun, GridPosterior
 from railpaper.experiments.base import ChapterResult
 from railpaper.experiments.quasi_gaussian_rbpf.spec import PAPER_STEPS, PARAMS
 from railpaper.stats import prediction_interval

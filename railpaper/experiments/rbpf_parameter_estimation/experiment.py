@@ -16,9 +16,10 @@ CRLB on the first record (:mod:`railpaper.experiments.rbpf_parameter_estimation.
 ``measurements_csv`` runs both RBPF schemes on a user's file (no evidence: it needs the truth).
 ``lateral=False`` skips Part 2 (sweep samples of the toy alone).
 
-:func:`run` returns a :class:`~railpaper.experiments.rbpf_parameter_estimation.result.
-RbpfParameterEstimationResult`: the metrics, timings and time series the pipeline writes, and
-the two parts' named results (``result.toy``, ``result.lateral``).  One record by hand:
+:func:`run` returns a
+:class:`~railpaper.experiments.rbpf_parameter_estimation.result.RbpfParameterEstimationResult`:
+the metrics, timings and time series the pipeline writes, and the two parts' named results
+(``result.toy``, ``result.lateral``).  One record by hand:
 :mod:`~railpaper.experiments.rbpf_parameter_estimation.lateral` (the toy's:
 :mod:`~railpaper.experiments.rbpf_parameter_estimation.toy`).
 """
@@ -47,7 +48,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
 from railpaper.experiments.rbpf_parameter_estimation.toy import TOY_INITS, run_toy
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 
 __all__ = ["SPEC", "Settings", "run", "validate"]
@@ -77,16 +78,17 @@ def validate(settings: Settings) -> None:
             raise ParameterError(f"{name} must be <= 1")
     fixed, theta = lateral.vehicle()
     check_sample_time("dt_s", settings.dt_s,
-                      L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6),
+                      lateral_16state.build_A_direct(fixed, theta, settings.speed_kmh / 3.6),
                       f"the lateral model at {settings.speed_kmh:g} km/h")
+    n_states = lateral_16state.N_STATES
     check_banks([("toy_particles", settings.toy_particles, settings.toy_particles, 2, 10,
                   "the toy RBPF"),
                  ("n_particles", settings.n_particles, settings.n_particles * settings.lateral,
-                  L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
+                  n_states, n_states * (n_states + 7) + 5,
                   "the lateral RBPF, F, H, G per particle"),
                  ("ibis_particles", settings.ibis_particles,
                   2 * settings.ibis_particles * settings.lateral,
-                  L.N_STATES, L.N_STATES * (L.N_STATES + 7) + 5,
+                  n_states, n_states * (n_states + 7) + 5,
                   "the lateral IBIS sampler, particles and their proposals"),
                  ("toy_ibis_particles", settings.toy_ibis_particles,
                   2 * settings.toy_ibis_particles, 2, 10,

@@ -20,8 +20,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.crlb import crlb_std, fisher_information
-from railpaper.engine.rbpf import FilterRun, run_rbpf
+from railpaper.engine import FilterRun, crlb_std, fisher_information, run_rbpf
 from railpaper.estimators.ekf import run_augmented_ekf
 from railpaper.experiments.lateral_vehicle import (  # noqa: F401 (the chapter's API)
     RecordSettings,
@@ -42,7 +41,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRun,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.settling import holds_from, settling_step
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
 
@@ -79,8 +78,8 @@ def lateral_rbpf(settings: Settings, system, record: LateralRecord, theta: np.nd
             dict(scheme="working", delta=settings.working_delta,
                  ess_fraction=settings.ess_fraction, tempering_steps=settings.tempering_steps,
                  log_mask=np.ones(5, bool)))
-    return run_rbpf(system, record.y, theta0, np.zeros(L.N_STATES),
-                    1e-10 * np.eye(L.N_STATES), rng, u=record.u_mps, **opts)
+    return run_rbpf(system, record.y, theta0, np.zeros(lateral_16state.N_STATES),
+                    1e-10 * np.eye(lateral_16state.N_STATES), rng, u=record.u_mps, **opts)
 
 
 def run_lateral_rbpf(settings: Settings, fixed, theta, record: LateralRecord, seed: int,
@@ -97,10 +96,11 @@ def lateral_crlb(settings: Settings, fixed, theta, record: LateralRecord) -> dic
     for label, var, u in (("known", record.du_var_m2ps2, record.u_mps),
                           ("unknown", record.u_var_m2ps2, None)):
         Q, R = filter_noise(fixed, theta, RecordSettings.of(settings), var)
-        info = fisher_information(L.lateral_system(fixed, v, settings.dt_s, Q, R,
-                                                   theta_ref=theta),
+        info = fisher_information(lateral_16state.lateral_system(fixed, v, settings.dt_s, Q, R,
+                                                                 theta_ref=theta),
                                   theta, record.y,
-                                  np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), u,
+                                  np.zeros(lateral_16state.N_STATES),
+                                  1e-10 * np.eye(lateral_16state.N_STATES), u,
                                   checkpoints=(350, settings.n_steps))
         for c, I in info.items():
             out[(label, c)] = crlb_std(I) / theta
@@ -115,14 +115,14 @@ def lateral_ekf(settings: Settings, fixed, theta, record: LateralRecord, seed, g
     if record.seed is None:
         return []
     Q, R = filter_noise(fixed, theta, RecordSettings.of(settings), record.du_var_m2ps2)
-    model = L.ekf_model(fixed, settings.speed_kmh / 3.6, settings.dt_s)
+    model = lateral_16state.ekf_model(fixed, settings.speed_kmh / 3.6, settings.dt_s)
     rng = np.random.default_rng([seed, 13])
     runs = []
     for _ in range(guesses):
         guess = theta * rng.uniform(settings.prior_low, settings.prior_high, 5)
         K = min(settings.ekf_steps, settings.n_steps)
-        r = run_augmented_ekf(model, record.y[:K], guess, np.zeros(L.N_STATES),
-                              1e-10 * np.eye(L.N_STATES), (0.3 * theta) ** 2, Q, R,
+        r = run_augmented_ekf(model, record.y[:K], guess, np.zeros(lateral_16state.N_STATES),
+                              1e-10 * np.eye(lateral_16state.N_STATES), (0.3 * theta) ** 2, Q, R,
                               (1e-4 * theta) ** 2, u=record.u_mps[:K], divergence_bound=1e12)
         runs.append(r.theta / theta if not r.diverged else np.full_like(r.theta, np.nan))
     return runs
@@ -143,11 +143,11 @@ def critical_speeds(fixed: dict, theta: np.ndarray, settings: Settings
     doubled = dict(fixed, mw=fixed["mw"] * 2, mb=fixed["mb"] * 2)
     curves = {}
     for key, fx in (("chosen", fixed), ("all_halved", halved), ("wheelset_bogie_doubled", doubled)):
-        re, vc = L.critical_speed(fx, theta, speeds)
+        re, vc = lateral_16state.critical_speed(fx, theta, speeds)
         curves[key] = re
         metrics[f"critical_speed_kmh_{key}"] = vc * 3.6 if vc > 0 else -1
-    A = L.build_A_direct(fixed, theta, settings.speed_kmh / 3.6)
-    metrics["least_damped_real_at_speed_per_s"] = L.least_damped(A)[0]
+    A = lateral_16state.build_A_direct(fixed, theta, settings.speed_kmh / 3.6)
+    metrics["least_damped_real_at_speed_per_s"] = lateral_16state.least_damped(A)[0]
     return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves}), metrics
 
 
@@ -186,7 +186,7 @@ def lateral_metrics(runs: list[np.ndarray], suffix: str, start: int = 350,
     out.update(max_abs_bias(finals).metrics(f"lateral_bias_max_abs{suffix}"))
     out.update(median_interval(np.abs(finals).max(axis=1))
                .metrics(f"lateral_median_final_abs_error_max{suffix}"))
-    for j, name in enumerate(L.PARAM_NAMES):
+    for j, name in enumerate(lateral_16state.PARAM_NAMES):
         out.update(mean_interval(finals[:, j]).metrics(f"lateral_bias_{name}{suffix}"))
     return out
 
@@ -269,11 +269,11 @@ def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
         steps = settling_step(np.abs(norm - 1.0) <= WITHIN)   # per parameter
         metrics[f"steps_to_within_5pct_all{suffix}"] = (int(steps.max()) if np.all(steps > 0)
                                                         else -1)
-        for j, name in enumerate(L.PARAM_NAMES):
+        for j, name in enumerate(lateral_16state.PARAM_NAMES):
             metrics[f"steps_to_within_5pct_{name}{suffix}"] = int(steps[j])
             metrics[f"final_relative_error_{name}{suffix}"] = float(norm[-1, j] - 1)
     # Rao-Blackwellisation (paper §4): the augmented state (16 + 5) vs what the particles sample
-    metrics["rb_augmented_state_dim"] = L.N_STATES + theta.size
+    metrics["rb_augmented_state_dim"] = lateral_16state.N_STATES + theta.size
     metrics["rb_particle_dim"] = int(runs[0].rbpf_paper_norm.shape[1])
     t_s = np.arange(1, n_steps + 1) * settings.dt_s
     part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
@@ -294,7 +294,7 @@ def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
 def lateral_timeseries(part: LateralPart) -> pd.DataFrame:
     """The illustrated (first) record's normalised estimates θ̂/θ of both schemes against time."""
     main, paper = part.runs[0].rbpf_working_norm, part.runs[0].rbpf_paper_norm
-    names = list(enumerate(L.PARAM_NAMES))
+    names = list(enumerate(lateral_16state.PARAM_NAMES))
     return pd.DataFrame({"t_s": part.t_s, **{f"{name}_norm": main[:, j] for j, name in names},
                          **{f"{name}_norm_paper_scheme": paper[:, j] for j, name in names}})
 
@@ -306,7 +306,7 @@ def lateral_crlb_metrics(settings: Settings, fixed, theta, rec: LateralRecord
     cr = lateral_crlb(settings, fixed, theta, rec)
     metrics = {}
     rows = []
-    for j, name in enumerate(L.PARAM_NAMES):
+    for j, name in enumerate(lateral_16state.PARAM_NAMES):
         metrics[f"crlb_rel_350_{name}"] = float(cr[("known", 350)][j])
         metrics[f"crlb_rel_final_{name}"] = float(cr[("known", settings.n_steps)][j])
         metrics[f"crlb_rel_350_unknown_input_{name}"] = float(cr[("unknown", 350)][j])

@@ -7,25 +7,27 @@ import pandas as pd
 
 from railpaper.experiments.base import ParameterError
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralRecord
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 CSV_INPUT = ("ydot_t1_mps", "ydot_t2_mps")
 
 
 def read_measurements(path: str, dt_s: float) -> LateralRecord:
-    """A user's record: columns ``t_s`` and :data:`L.CHANNELS` (SI units), optionally the track
-    lateral velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s`` (s).
+    """A user's record: columns ``t_s`` and
+    :data:`~railpaper.models.lateral_16state.CHANNELS` (SI units), optionally the track lateral
+    velocities ``ydot_t1_mps, ydot_t2_mps`` (m/s); uniform time step = ``dt_s`` (s).
     Without the track velocities the filters' process noise assumes input changes of 0.04 m/s
     std."""
     try:
         frame = pd.read_csv(path)
     except (OSError, ValueError) as exc:
         raise ParameterError(f"measurements_csv: cannot read {path!r}: {exc}") from None
-    missing = [c for c in ("t_s",) + L.CHANNELS if c not in frame.columns]
+    missing = [c for c in ("t_s",) + lateral_16state.CHANNELS if c not in frame.columns]
     if missing:
         raise ParameterError(f"measurements_csv: missing column(s) {missing}; need t_s, "
-                             f"{', '.join(L.CHANNELS)} and optionally {', '.join(CSV_INPUT)}")
-    cols = ["t_s", *L.CHANNELS, *[c for c in CSV_INPUT if c in frame.columns]]
+                             f"{', '.join(lateral_16state.CHANNELS)} and optionally "
+                             f"{', '.join(CSV_INPUT)}")
+    cols = ["t_s", *lateral_16state.CHANNELS, *[c for c in CSV_INPUT if c in frame.columns]]
     arr = frame[cols].apply(pd.to_numeric, errors="coerce").to_numpy(float)
     if len(arr) < 10:
         raise ParameterError(f"measurements_csv: need >= 10 rows, got {len(arr)}")

@@ -12,7 +12,7 @@ from a truth plant with three things the linear model leaves out (numbers with s
 
 The plant (:mod:`railpaper.models.lateral_truth`) runs at ``dt_s / truth_substeps`` on the same
 alignment profile and with the same sensor-noise draws as the chapter's record of the same seed
-(:func:`railpaper.experiments.rbpf_parameter_estimation.experiment.simulate_lateral`), so each record has a
+(:func:`railpaper.experiments.lateral_vehicle.simulate_lateral`), so each record has a
 matched (linear-plant) twin: the paired comparison.  The filters are the chapter's, unchanged
 (known track input, the chapter's Q and R): ``lateral_ekf`` with ``ekf_converged``, and
 ``run_lateral_rbpf`` with the working scheme, all of
@@ -45,8 +45,8 @@ from railpaper.experiments.lateral_vehicle import RecordSettings
 from railpaper.experiments.rbpf_parameter_estimation import lateral
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralRecord
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
-from railpaper.models import lateral_16state as L
-from railpaper.models import lateral_truth as T
+from railpaper.models import lateral_16state
+from railpaper.models import lateral_truth
 from railpaper.paths import DATA_DIR
 from railpaper.settling import holds_from
 from railpaper.stats import rate
@@ -118,7 +118,7 @@ def mismatch_settings(path: Path | None = None, components=COMPONENTS,
 
 def track_input(settings: Settings, fixed: dict, seed: int) -> np.ndarray:
     """ẏt under both wheelsets at the truth rate, (K_fine + 1, 2), m/s — the chapter's
-    :func:`~railpaper.experiments.rbpf_parameter_estimation.experiment.simulate_lateral` input (same
+    :func:`~railpaper.experiments.lateral_vehicle.simulate_lateral` input (same
     profile for the same seed; ``tests/experiments/rbpf_parameter_estimation/test_mismatch.py`` checks the records agree)."""
     v = settings.speed_kmh / 3.6
     dtf = settings.dt_s / settings.truth_substeps
@@ -158,23 +158,24 @@ def simulate_mismatch(settings: Settings, fixed: dict, theta: np.ndarray, seed: 
     -------
     record : LateralRecord
         What the filters are given, as
-        :func:`~railpaper.experiments.rbpf_parameter_estimation.experiment.simulate_lateral` returns it.
+        :func:`~railpaper.experiments.lateral_vehicle.simulate_lateral` returns it.
     diagnostics : dict
         The plant's size on this record (see :class:`MismatchResult` ``records``).
     """
     v, sub = settings.speed_kmh / 3.6, settings.truth_substeps
     dtf = settings.dt_s / sub
     dq = track_input(settings, fixed, seed)
-    wr = T.WheelRail(st["friction"], st["wheel_load_N"], st["conicity_scale_m"])
-    x = T.simulate_truth(fixed, theta, v, dtf, dq[:-1], wr)
-    plant = T.TruthPlant(fixed, theta, v, wr)
+    wr = lateral_truth.WheelRail(st["friction"], st["wheel_load_N"], st["conicity_scale_m"])
+    x = lateral_truth.simulate_truth(fixed, theta, v, dtf, dq[:-1], wr)
+    plant = lateral_truth.TruthPlant(fixed, theta, v, wr)
     rng = np.random.default_rng([seed, 7])                  # the chapter's noise draws
     std = lateral.noise_std(RecordSettings.of(settings))
     noise = rng.standard_normal((settings.n_steps, 5)) * std
     y = chain_output(plant.measurements(x), noise, settings, st)
     # noise-free model error against the linear plant, in units of each channel's noise std
-    x_lin = L.simulate_truth(fixed, theta, v, dtf, dq[:-1])
-    lin = x_lin @ L.measurement_matrix(L.build_A_direct(fixed, theta, v)).T
+    x_lin = lateral_16state.simulate_truth(fixed, theta, v, dtf, dq[:-1])
+    H = lateral_16state.measurement_matrix(lateral_16state.build_A_direct(fixed, theta, v))
+    lin = x_lin @ H.T
     zero = np.zeros_like(noise)
     err = (chain_output(plant.measurements(x), zero, settings, st)
            - chain_output(lin, zero, settings, dict(st, components=())))  # what the filters expect
@@ -186,7 +187,7 @@ def simulate_mismatch(settings: Settings, fixed: dict, theta: np.ndarray, seed: 
                 conicity_ratio=float(contact.equivalent_conicity(np.sqrt(2) * rms_d, 1.0, scale))
                 if np.isfinite(scale) and rms_d > 0 else 1.0,
                 **{f"model_error_{c}": float(e) for c, e in
-                   zip(L.CHANNELS, np.sqrt(np.mean(err ** 2, axis=0)) / std)})
+                   zip(lateral_16state.CHANNELS, np.sqrt(np.mean(err ** 2, axis=0)) / std)})
     record = LateralRecord(seed=seed, y=y, u_mps=dq[0:-1:sub][:settings.n_steps],
                                    du_var_m2ps2=np.diff(dq[::sub], axis=0).var(axis=0),
                                    u_var_m2ps2=dq.var(axis=0))
@@ -208,9 +209,9 @@ def _filter_record(settings: Settings, fixed, theta, rec, seed, guesses
                ekf_diverged=_diverged(ekf[0]), ekf_diverged_count=int(sum(map(_diverged, ekf))),
                rbpf_all_within=bool(holds_from(np.abs(norm - 1.0) <= lateral.WITHIN, START).all()),
                **{f"rbpf_final_error_{n}": float(norm[-1, j] - 1)
-                  for j, n in enumerate(L.PARAM_NAMES)},
+                  for j, n in enumerate(lateral_16state.PARAM_NAMES)},
                **{f"ekf_final_error_{n}": float(ekf[0][-1, j] - 1)
-                  for j, n in enumerate(L.PARAM_NAMES)})
+                  for j, n in enumerate(lateral_16state.PARAM_NAMES)})
     return row, norm, ekf
 
 
@@ -265,7 +266,7 @@ def run_mismatch(settings: Settings, n_records: int | None = None, *, components
         chapter's) and ``ekf_lateral_diverged_count`` (of those guesses, runs that stopped),
         ``lateral_ekf_converge_rate`` (first guess, over records),
         ``lateral_all_within_5pct_fraction`` (working scheme, over records), the chapter's
-        :func:`~railpaper.experiments.rbpf_parameter_estimation.evidence.lateral_metrics` with suffix
+        :func:`~railpaper.experiments.rbpf_parameter_estimation.lateral.lateral_metrics` with suffix
         ``_working_scheme<plant>``; paired counts ``rbpf_within_lost_mismatch`` /
         ``rbpf_within_gained_mismatch`` and ``ekf_converged_lost_mismatch`` /
         ``ekf_converged_gained_mismatch`` (records where the outcome flips from the matched to
@@ -315,7 +316,7 @@ def run_mismatch(settings: Settings, n_records: int | None = None, *, components
     metrics["mismatch_saturation_max"] = float(mm.saturation_max.max())
     metrics["mismatch_displacement_max_m"] = float(mm.displacement_max_m.max())
     metrics["mismatch_conicity_ratio_median"] = float(mm.conicity_ratio.median())
-    for c in L.CHANNELS:
+    for c in lateral_16state.CHANNELS:
         metrics[f"mismatch_model_error_median_{c}"] = float(mm[f"model_error_{c}"].median())
     progress(1.0, "done")
     return MismatchResult(metrics=metrics, records=records, rbpf=rbpf, ekf_first=ekf_first,

@@ -38,7 +38,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.ibis import credible_interval_covers, run_ibis
+from railpaper.engine import credible_interval_covers, run_ibis
 from railpaper.experiments.rbpf_parameter_estimation import toy
 from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralPart,
@@ -47,7 +47,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     ToyPart,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.models.linear_toys import EQ18_G, Simulation
 from railpaper.settling import holds_from
 from railpaper.stats import median_interval, rate
@@ -84,7 +84,7 @@ def lateral_posterior(settings: Settings, system, record: LateralRecord, theta: 
     :func:`~railpaper.experiments.rbpf_parameter_estimation.lateral.record_system`) with the RBPF's
     box θ × [``prior_low``, ``prior_high``] and state prior x0 = 0, P0 = 1e-10 I."""
     run = run_ibis(system, record.y, settings.prior_low * theta, settings.prior_high * theta,
-                   np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES),
+                   np.zeros(lateral_16state.N_STATES), 1e-10 * np.eye(lateral_16state.N_STATES),
                    np.random.default_rng([seed, SEED_KEY]), u=record.u_mps,
                    n_particles=settings.ibis_particles, proposal=PROPOSAL, min_moves=MIN_MOVES)
     return PosteriorRun.from_ibis(run, theta)
@@ -173,7 +173,7 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
     runs = [r for r in part.runs if r.posterior is not None]
     out = {}
     first = runs[0].posterior
-    for j, name in enumerate(L.PARAM_NAMES):
+    for j, name in enumerate(lateral_16state.PARAM_NAMES):
         for label, k in (("100", 100), ("350", START), ("final", len(first.mean))):
             out[f"posterior_sd_rel_{label}_{name}"] = float(first.sd[k - 1, j])
             out[f"posterior_mean_rel_error_{label}_{name}"] = float(first.mean[k - 1, j] - 1)
@@ -184,9 +184,9 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
                .metrics("lateral_within_5pct_from_350_rate_posterior"))
     sd350 = np.array([r.posterior.sd[START - 1] for r in runs])
     out.update(median_interval(sd350.max(axis=1)).metrics("posterior_sd_rel_350_max"))
-    for j, name in enumerate(L.PARAM_NAMES):
+    for j, name in enumerate(lateral_16state.PARAM_NAMES):
         out.update(median_interval(sd350[:, j]).metrics(f"posterior_sd_rel_350_median_{name}"))
-    ones = np.ones(len(L.PARAM_NAMES))
+    ones = np.ones(len(lateral_16state.PARAM_NAMES))
     covers = {"working": [credible_interval_covers(r.posterior, ones) for r in runs],
               "paper_scheme": [toy.gaussian_covers(r.rbpf_paper_norm[-1],
                                                    r.rbpf_paper_sd_norm[-1], 1.0) for r in runs],

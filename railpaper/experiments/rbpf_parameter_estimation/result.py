@@ -14,7 +14,8 @@ model-error study in :attr:`RbpfParameterEstimationResult.mismatch`.
 
 Extending: an estimator run on every lateral record is one more field of :class:`LateralRun` with
 a default of ``None`` (normalised estimates ``(K, 5)`` like the others, or its own frozen
-dataclass), filled where :func:`rbpf_parameter_estimation.run_lateral` builds the records;
+dataclass), filled where
+:func:`~railpaper.experiments.rbpf_parameter_estimation.lateral.run_lateral` builds the records;
 :meth:`LateralPart.stack` then serves it by field name (``"posterior.sd"``: a field of a field),
 and statistics over records (coverage, rates) go into the run's metrics by
 :mod:`~railpaper.experiments.rbpf_parameter_estimation.evidence` and
@@ -178,7 +179,8 @@ class LateralRun:
         The record's seed (None for a user's file).
     rbpf_paper_norm : ndarray, shape (K, 5)
         θ̂/θ after each measurement, RBPF with the paper's Steps 1–2.6 (1 = true value), in the
-        order of :data:`lateral_16state.PARAM_NAMES` (C_sy, λ, K_py, K_sy, C_saly).
+        order of :data:`~railpaper.models.lateral_16state.PARAM_NAMES` (C_sy, λ, K_py, K_sy,
+        C_saly).
     rbpf_working_norm : ndarray, shape (K, 5)
         The same with our working scheme (same prior particles).
     ekf_norm : tuple of ndarray, each (K_ekf, 5)
@@ -207,7 +209,8 @@ class LateralPart:
     Attributes
     ----------
     fixed : dict of str to float
-        The vehicle's fixed quantities (SI units, keys :data:`lateral_16state.FIXED_KEYS`).
+        The vehicle's fixed quantities (SI units, keys
+        :data:`~railpaper.models.lateral_16state.FIXED_KEYS`).
     theta_true : ndarray, shape (5,)
         True (C_sy N s/m, λ 1, K_py N/m, K_sy N/m, C_saly N s/m).
     t_s : ndarray, shape (K,)
@@ -276,8 +279,8 @@ class LateralPart:
 
 @dataclass
 class RbpfParameterEstimationResult(ChapterResult):
-    """What :func:`rbpf_parameter_estimation.run` returns: :class:`ChapterResult` plus the two
-    parts.
+    """What :func:`~railpaper.experiments.rbpf_parameter_estimation.experiment.run` returns:
+    :class:`ChapterResult` plus the two parts.
 
     Attributes
     ----------

@@ -16,11 +16,11 @@ SPEC = ChapterSpec(
     title="RBPF versus EKF for suspension parameters of a high-speed train (Ding et al. 2014)",
     paper="003_106973ea68498aa8.txt",
     notebook="rbpf_parameter_estimation.ipynb",
-    quick_sizes="toy: 40 records (full: 90) x 500 steps, 300 particles, IBIS 1000; lateral: 5 "
-                "records (full: 30, the paper scheme alone on 80 more and the working scheme "
-                "alone on 40 more) x 500 steps, 200 particles, both schemes, one EKF guess "
-                "each, IBIS on 5 (full: 30) with 100 (250) particles; model error: 5 (20) "
-                "records",
+    quick_sizes="toy: 40 records (full: 300) x 500 steps, 300 particles, IBIS with 1000 "
+                "particles on 40 of them (full: 90); lateral: 5 records (full: 30, plus 80 with "
+                "the paper scheme alone and 40 with the working scheme alone) x 500 steps, 200 "
+                "particles, both schemes, one EKF guess each (10 on the illustrated record), "
+                "IBIS on 5 (full: 30) with 100 (250) particles; model error: 5 (20) records",
     notebook_requires={"lateral": True},
     parameters=[
         P("seed", 0, "int", "first Monte Carlo record: records seed, seed + 1 and so on (toy and "

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.rbpf import FilterRun, run_rbpf
+from railpaper.engine import FilterRun, run_rbpf
 from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings

@@ -57,8 +57,8 @@ from railpaper.settling import settling_time_s
 POLE_SETS = ([-5.0, -80.0], [-150.0, -200.0], [-1000.0, -1500.0], [-60.0 + 40.0j, -60.0 - 40.0j])
 
 #: Seeds (the first ones) on which the Hertz contact is simulated for the linearisation claim:
-#: about a fifth of its 10 % threshold, so 40 seeds decide it (one RK4 run per seed,
-#: paper speed and reading of P0 costs ≈ 0.06 s).
+#: about a fifth of its 10 % threshold, so 40 seeds decide it (one RK4 run per seed, at the
+#: paper speed and reading of P0).
 HERTZ_SEEDS = 40
 
 #: Per-sample quantities of the Monte Carlo table, in the order of its columns.

@@ -23,14 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from railpaper.engine.changepoint import change_likelihoods, change_posterior
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
-from railpaper.engine.rbpf import run_rbpf
-from railpaper.engine.residual_alarms import cusum_variance, whitened_innovations
+from railpaper.engine import (LinearGaussianBatch, change_likelihoods, change_posterior,
+                              cusum_variance, run_rbpf, whitened_innovations)
 from railpaper.experiments.lateral_vehicle import LateralRecord
 from railpaper.experiments.suspension_fault_detection.result import Fault
 from railpaper.experiments.suspension_fault_detection.spec import TRACKED, Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 #: Initial state covariance of every filter (the vehicle starts at rest), state units squared.
 P0_SCALE = 1e-10
@@ -42,8 +40,8 @@ def residual_cusum(system, theta: np.ndarray, record: LateralRecord, variance_ra
     growing ``variance_ratio``-fold."""
     nominal = system(theta[None])
     one = LinearGaussianBatch(nominal.F[0], nominal.Q, nominal.H[0], nominal.R, nominal.B[0])
-    z = whitened_innovations(one, record.y, np.zeros(L.N_STATES), P0_SCALE * np.eye(L.N_STATES),
-                             u=record.u_mps).z
+    z = whitened_innovations(one, record.y, np.zeros(lateral_16state.N_STATES),
+                             P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps).z
     return cusum_variance(z, variance_ratio)
 
 
@@ -54,7 +52,7 @@ def hypotheses(faults: list[Fault], theta: np.ndarray) -> tuple[list[str], np.nd
         if fault.kind != "abrupt":
             continue
         changed = theta.copy()
-        changed[L.PARAM_NAMES.index(fault.parameter)] *= fault.factor
+        changed[lateral_16state.PARAM_NAMES.index(fault.parameter)] *= fault.factor
         names.append(fault.name)
         values.append(changed)
     return names, np.array(values)
@@ -93,8 +91,9 @@ def exact_change_posterior(system, theta: np.ndarray, record: LateralRecord,
     if inside.size == 0:                          # the record ended before any fault time
         return ExactPosterior(np.zeros(K), np.zeros(len(fault_steps)),
                               np.full(len(values), 1.0 / len(values)), 0)
-    lik = change_likelihoods(system, record.y, theta, values, inside, np.zeros(L.N_STATES),
-                             P0_SCALE * np.eye(L.N_STATES), u=record.u_mps)
+    lik = change_likelihoods(system, record.y, theta, values, inside,
+                             np.zeros(lateral_16state.N_STATES),
+                             P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps)
     # the prior's mass on grid steps past the record's end is still "not yet changed"
     prior = np.ones((len(values), inside.size))
     p_none = p_no_fault + (1.0 - p_no_fault) * (1.0 - inside.size / len(fault_steps))
@@ -107,7 +106,7 @@ def exact_change_posterior(system, theta: np.ndarray, record: LateralRecord,
 def tracked_system(system, theta: np.ndarray):
     """``system`` of the two tracked parameters (:data:`TRACKED`, in their units), the others
     held at ``theta``."""
-    columns = [L.PARAM_NAMES.index(name) for name in TRACKED]
+    columns = [lateral_16state.PARAM_NAMES.index(name) for name in TRACKED]
 
     def reduced(tracked: np.ndarray) -> LinearGaussianBatch:
         tracked = np.atleast_2d(tracked)
@@ -124,13 +123,14 @@ def rbpf_estimates(settings: Settings, system, theta: np.ndarray, record: Latera
     (K, 2): ``n_particles`` particles from nominal × U(``prior_low``, ``prior_high``) (generator
     ``[seed, 11]``), the paper's scheme (resample and Liu–West move every step,
     δ = ``paper_delta``)."""
-    columns = [L.PARAM_NAMES.index(name) for name in TRACKED]
+    columns = [lateral_16state.PARAM_NAMES.index(name) for name in TRACKED]
     nominal = theta[columns]
     rng = np.random.default_rng([seed, 11])
     cloud = nominal * rng.uniform(settings.prior_low, settings.prior_high,
                                   (settings.n_particles, 2))
-    run = run_rbpf(tracked_system(system, theta), record.y, cloud, np.zeros(L.N_STATES),
-                   P0_SCALE * np.eye(L.N_STATES), rng, u=record.u_mps, scheme="paper",
+    run = run_rbpf(tracked_system(system, theta), record.y, cloud,
+                   np.zeros(lateral_16state.N_STATES), P0_SCALE * np.eye(lateral_16state.N_STATES),
+                   rng, u=record.u_mps, scheme="paper",
                    delta=settings.paper_delta)
     return run.theta_mean / nominal
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from railpaper.engine.residual_alarms import first_alarm
+from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
 from railpaper.stats import median_interval, quantile_ranks, rate

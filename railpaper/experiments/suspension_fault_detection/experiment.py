@@ -39,7 +39,7 @@ from railpaper.experiments.suspension_fault_detection.result import (
     RecordRun,
 )
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
 
@@ -68,9 +68,9 @@ def validate(settings: Settings) -> None:
         raise ParameterError(f"parameter 'faults': unknown fault '{unknown[0] if unknown else ''}'"
                              f"; faults: {', '.join(catalogue)}")
     extra = settings.extra_fault_parameter
-    if extra and extra not in L.PARAM_NAMES:
+    if extra and extra not in lateral_16state.PARAM_NAMES:
         raise ParameterError(f"parameter 'extra_fault_parameter': unknown parameter '{extra}'; "
-                             f"parameters: {', '.join(L.PARAM_NAMES)}")
+                             f"parameters: {', '.join(lateral_16state.PARAM_NAMES)}")
     if settings.spectrum not in SPECTRA:
         raise ParameterError(f"parameter 'spectrum': unknown spectrum '{settings.spectrum}'")
     grid = faults.fault_times_s(fault_settings)
@@ -104,7 +104,8 @@ def validate(settings: Settings) -> None:
         raise ParameterError("parameter 'paper_delta' must be in (0, 1)")
     fixed, theta = vehicle()
     for speed in settings.speeds_kmh:
-        check_sample_time("dt_s", settings.dt_s, L.build_A_direct(fixed, theta, speed / 3.6),
+        check_sample_time("dt_s", settings.dt_s,
+                          lateral_16state.build_A_direct(fixed, theta, speed / 3.6),
                           f"the lateral vehicle at {speed:g} km/h")
 
 
@@ -150,7 +151,7 @@ def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.
     statistics = {"residual": detectors.residual_cusum(system, theta, rec.record,
                                                        settings.cusum_variance_ratio),
                   "exact": exact.p_changed}
-    j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
+    j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     estimate = {}
     if j is not None:
         estimate["exact"] = float(exact.value_posterior @ (values[:, j] / theta[j]))

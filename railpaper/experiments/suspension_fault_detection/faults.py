@@ -11,7 +11,7 @@ import pandas as pd
 from railpaper.data import DataError, load_quantities, read_toml
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
 from railpaper.experiments.suspension_fault_detection.spec import SPEC
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.paths import DATA_DIR
 
 FAULTS_FILE = DATA_DIR / SPEC.name / "faults.toml"
@@ -32,11 +32,11 @@ def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
         fault = Fault(name=name, parameter=row.get("parameter", ""),
                       factor=float(row.get("factor", -1.0)), kind=row.get("kind", ""),
                       label=row.get("label", name))
-        if fault.parameter not in L.PARAM_NAMES or fault.kind not in KINDS \
+        if fault.parameter not in lateral_16state.PARAM_NAMES or fault.kind not in KINDS \
                 or not fault.factor >= 0 or not row.get("source"):
             raise DataError(f"{path}: fault '{name}' needs parameter (one of "
-                            f"{', '.join(L.PARAM_NAMES)}), factor >= 0, kind (abrupt or drift) "
-                            "and source")
+                            f"{', '.join(lateral_16state.PARAM_NAMES)}), factor >= 0, "
+                            "kind (abrupt or drift) and source")
         faults[name] = fault
     quantities = load_quantities(path, SETTINGS, section="settings")
     return faults, {k: float(q.value) for k, q in quantities.items()}
@@ -67,7 +67,7 @@ def schedule(fault: Fault | None, fault_settings: dict, theta: np.ndarray, fault
     the ramp's value at its middle."""
     if fault is None:
         return [theta], [0]
-    j = L.PARAM_NAMES.index(fault.parameter)
+    j = lateral_16state.PARAM_NAMES.index(fault.parameter)
     thetas, starts = [theta], [0]
     if fault.kind == "abrupt":
         changed = theta.copy()
@@ -98,8 +98,8 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
     for fault in [None] + list(faults):
         changed = theta.copy()
         if fault is not None:
-            changed[L.PARAM_NAMES.index(fault.parameter)] *= fault.factor
-        _, v = L.critical_speed(fixed, changed, CRITICAL_SEARCH_KMH / 3.6)
+            changed[lateral_16state.PARAM_NAMES.index(fault.parameter)] *= fault.factor
+        _, v = lateral_16state.critical_speed(fixed, changed, CRITICAL_SEARCH_KMH / 3.6)
         rows.append({"fault": NO_FAULT if fault is None else fault.name,
                      "label": "fault-free" if fault is None else fault.label,
                      "critical_speed_kmh": v * 3.6 if v > 0 else -1.0})

@@ -22,10 +22,10 @@ from railpaper.experiments.lateral_vehicle import (
     sampled_record,
     track_velocity,
 )
-from railpaper.experiments.suspension_fault_detection import faults as F
+from railpaper.experiments.suspension_fault_detection import faults
 from railpaper.experiments.suspension_fault_detection.result import Fault
 from railpaper.experiments.suspension_fault_detection.spec import Settings
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 
 @dataclass(frozen=True)
@@ -72,18 +72,19 @@ def simulate_faulted(settings: Settings, fault_settings: dict, fixed: dict, thet
     dt_fine = rs.dt_s / sub
     dq = track_velocity(rs, fixed, seed)
     fault_sample = int(round(fault_time_s / rs.dt_s)) if fault is not None else K
-    thetas, starts = F.schedule(fault, fault_settings, theta, fault_sample * sub, K * sub,
-                                dt_fine)
+    thetas, starts = faults.schedule(fault, fault_settings, theta, fault_sample * sub, K * sub,
+                                     dt_fine)
     v = speed_kmh / 3.6
-    states = L.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine, dq[:-1])
-    H_pieces = np.stack([L.measurement_matrix(L.build_A_direct(fixed, th, v)) for th in thetas])
+    states = lateral_16state.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine, dq[:-1])
+    H_pieces = np.stack([lateral_16state.measurement_matrix(
+        lateral_16state.build_A_direct(fixed, th, v)) for th in thetas])
     piece = np.searchsorted(np.asarray(starts), np.arange(1, K + 1) * sub, side="left") - 1
     record = sampled_record(rs, seed, states, H_pieces[piece], dq)
-    contact = L.flange_contact_step(states, fault_settings["flange_clearance_m"])
+    contact = lateral_16state.flange_contact_step(states, fault_settings["flange_clearance_m"])
     end = K if contact < 0 else min(K, (contact - 1) // sub)
     if end < K:
         record = replace(record, y=record.y[:end], u_mps=record.u_mps[:end])
-    j = None if fault is None else L.PARAM_NAMES.index(fault.parameter)
+    j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     factor = (np.ones(end) if j is None else
               np.array([th[j] for th in thetas])[piece[:end]] / theta[j])
     return FaultedRecord(record=record, fault_step=fault_sample + 1 if fault else -1,

@@ -2,7 +2,7 @@
 
 import pytest
 
-from railpaper.engine.kalman_bank import multiply_adds
+from railpaper.engine import bank_multiply_adds
 from railpaper.experiments.quasi_gaussian_rbpf.computing_time import (
     PAIRED,
     operation_metrics,
@@ -16,7 +16,7 @@ def test_shared_parts_and_linear_growth(name):
     but the search's N log2 N comparisons and the Cholesky factor (independent of N)."""
     n, p, d = 2, 2, 2
     small, large = (operations_per_step(name, N, n, p, d) for N in (512, 1024))
-    assert small["kalman bank"] == 512 * multiply_adds(n, p, 0)
+    assert small["kalman bank"] == 512 * bank_multiply_adds(n, p, 0)
     for part in small:
         if part.startswith("search"):          # N (2 + d + n + n^2) + N log2 N
             copies = 2 + d + n + n * n

@@ -8,13 +8,13 @@ import pytest
 from conftest import railpaper_cli
 
 from railpaper.data import read_toml
-from railpaper.engine.rbpf import run_rbpf
+from railpaper.engine import run_rbpf
 from railpaper.experiments.base import ParameterError, check_metrics
 from railpaper.experiments.lateral_vehicle import RecordSettings, prior_centre
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation import measurements
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 from railpaper.paths import DATA_DIR
 from railpaper.pipeline.claim_rules import is_untestable, rule_metrics
 from railpaper.settling import settling_step
@@ -134,7 +134,7 @@ def test_measurements_csv_validation(tmp_path):
     pd.DataFrame({"t_s": np.arange(20) * 1e-3, "acc_w1_mps2": 0.0}).to_csv(bad, index=False)
     with pytest.raises(ParameterError, match="missing column"):
         measurements.read_measurements(str(bad), settings.dt_s)
-    good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in L.CHANNELS}})
+    good = pd.DataFrame({"t_s": np.arange(20) * 2e-3, **{c: 0.1 for c in lateral_16state.CHANNELS}})
     good.to_csv(tmp_path / "step.csv", index=False)
     with pytest.raises(ParameterError, match="dt_s"):
         measurements.read_measurements(str(tmp_path / "step.csv"), settings.dt_s)
@@ -146,7 +146,8 @@ def test_measurements_csv_validation(tmp_path):
 
 def test_lateral_rbpf_survives_degenerate_weights():
     fixed, theta = study.vehicle()
-    system = L.lateral_system(fixed, 300 / 3.6, 1e-3, 1e-12 * np.eye(16), 1e-6 * np.eye(5))
+    system = lateral_16state.lateral_system(fixed, 300 / 3.6, 1e-3, 1e-12 * np.eye(16),
+                                            1e-6 * np.eye(5))
     rng = np.random.default_rng(0)
     y = np.full((30, 5), 1e6)                     # impossible data: every weight underflows
     run = run_rbpf(system, y, theta * rng.uniform(0.5, 1.7, (20, 5)), np.zeros(16),
@@ -193,9 +194,10 @@ def test_typed_lateral_result_matches_outputs_and_definitions(quick_result):
                                   record.du_var_m2ps2)
         rng = np.random.default_rng([settings.seed, 11])   # documented: prior, then the filter
         theta0 = theta * rng.uniform(settings.prior_low, settings.prior_high, (200, 5))
-        run = run_rbpf(L.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s, Q, R),
-                       record.y, theta0, np.zeros(16), 1e-10 * np.eye(16), rng, u=record.u_mps,
-                       scheme="paper", delta=settings.paper_delta)
+        system = lateral_16state.lateral_system(fixed, settings.speed_kmh / 3.6, settings.dt_s,
+                                                Q, R)
+        run = run_rbpf(system, record.y, theta0, np.zeros(16), 1e-10 * np.eye(16), rng,
+                       u=record.u_mps, scheme="paper", delta=settings.paper_delta)
     np.testing.assert_array_equal(run.theta_mean / theta, lat.illustrated.rbpf_paper_norm)
 
 
@@ -205,7 +207,7 @@ def test_user_record_input_is_held_one_step(tmp_path):
     settings = chapter.SPEC.resolve({}, quick=True)
     t = np.arange(30) * 1e-3
     u1, u2 = np.sin(40 * t), np.cos(25 * t)
-    frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in L.CHANNELS}, "ydot_t1_mps": u1,
+    frame = pd.DataFrame({"t_s": t, **{c: 0.1 for c in lateral_16state.CHANNELS}, "ydot_t1_mps": u1,
                           "ydot_t2_mps": u2})
     frame.to_csv(tmp_path / "u.csv", index=False)
     rec = measurements.read_measurements(str(tmp_path / "u.csv"), settings.dt_s)
@@ -268,7 +270,7 @@ def test_exact_posterior_of_the_illustrated_record_is_ibis_as_documented(quick_r
     the Cramer-Rao bound (Fisher information of the Kalman likelihood, an independent
     computation: Bernstein-von Mises, flat prior) within the sampler's error, and the RBPF's
     stored spreads are run_rbpf's theta_std."""
-    from railpaper.engine.ibis import run_ibis
+    from railpaper.engine import run_ibis
     from railpaper.threads import one_thread
 
     settings, result = quick_result

@@ -13,13 +13,13 @@ from scipy import signal, stats
 from railpaper import sensors
 from railpaper.data import load_quantities
 from railpaper.experiments.lateral_vehicle import RecordSettings
-from railpaper.experiments.rbpf_parameter_estimation import experiment as C
+from railpaper.experiments.rbpf_parameter_estimation import experiment
 from railpaper.experiments.rbpf_parameter_estimation import lateral as study
-from railpaper.experiments.rbpf_parameter_estimation import mismatch as M
+from railpaper.experiments.rbpf_parameter_estimation import mismatch
 from railpaper.paths import DATA_DIR
 
-SMALL = C.SPEC.resolve(dict(n_steps=400, truth_substeps=4, n_particles=20, ekf_guesses=2,
-                            ekf_steps=40))
+SMALL = experiment.SPEC.resolve(dict(n_steps=400, truth_substeps=4, n_particles=20,
+                                     ekf_guesses=2, ekf_steps=40))
 RECORD = RecordSettings.of(SMALL)
 
 
@@ -51,20 +51,21 @@ def test_lowpass_causal_and_zero_phase():
 
 
 def test_mismatch_toml_numbers():
-    q = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "mismatch.toml", M.MISMATCH_KEYS)
+    q = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "mismatch.toml",
+                        mismatch.MISMATCH_KEYS)
     veh = load_quantities(DATA_DIR / "rbpf-parameter-estimation" / "parameters.toml")
     mass = veh["mbd"].value + veh["mb"].value + 2 * veh["mw"].value
     assert q["wheel_load"].value == pytest.approx(mass * q["gravity"].value / 4, rel=1e-9)
     assert q["lowpass_cutoff"].value == 40.0
     assert q["lowpass_order"].value == 2
-    for key in M.MISMATCH_KEYS:
+    for key in mismatch.MISMATCH_KEYS:
         assert q[key].source.strip()
 
 
 def test_linear_truth_record_is_the_chapter_record():
     fixed, theta = study.vehicle()
-    st = M.mismatch_settings(components=())
-    rec, diag = M.simulate_mismatch(SMALL, fixed, theta, 4, st)
+    st = mismatch.mismatch_settings(components=())
+    rec, diag = mismatch.simulate_mismatch(SMALL, fixed, theta, 4, st)
     ref = study.simulate_lateral(RECORD, fixed, theta, 4)
     np.testing.assert_array_equal(rec.u_mps, ref.u_mps)               # same track input
     np.testing.assert_array_equal(rec.du_var_m2ps2, ref.du_var_m2ps2)
@@ -79,18 +80,18 @@ def test_paper_chain_is_a_butterworth_on_the_acquired_data():
     fixed, theta = study.vehicle()
     ref = study.simulate_lateral(RECORD, fixed, theta, 2)
     sos = signal.butter(2, 40.0, fs=1 / SMALL.dt_s, output="sos")
-    rec, _ = M.simulate_mismatch(SMALL, fixed, theta, 2, M.mismatch_settings(
+    rec, _ = mismatch.simulate_mismatch(SMALL, fixed, theta, 2, mismatch.mismatch_settings(
         components=("lowpass",), chain="paper"))
     expected = signal.sosfilt(sos, ref.y, axis=0)
     assert np.max(np.abs(rec.y - expected) / study.noise_std(RECORD)) < 1e-6
-    rec, _ = M.simulate_mismatch(SMALL, fixed, theta, 2, M.mismatch_settings(
+    rec, _ = mismatch.simulate_mismatch(SMALL, fixed, theta, 2, mismatch.mismatch_settings(
         components=("lowpass",), chain="paper_zero_phase"))
     expected = signal.sosfiltfilt(sos, ref.y, axis=0)
     assert np.max(np.abs(rec.y - expected) / study.noise_std(RECORD)) < 1e-6
 
 
 def test_run_mismatch_metrics_from_records():
-    res = M.run_mismatch(SMALL, 2, chain="paper")
+    res = mismatch.run_mismatch(SMALL, 2, chain="paper")
     m, r = res.metrics, res.records
     assert list(r.plant) == ["mismatch", "matched"] * 2
     for plant in ("mismatch", "matched"):
@@ -117,6 +118,6 @@ def test_run_mismatch_metrics_from_records():
     assert m["mismatch_saturation_max"] == mm.saturation_max.max() > 0
     assert 1 < m["mismatch_conicity_ratio_median"] < 1.5
     assert np.isnan(ma.saturation_max).all()
-    again = M.run_mismatch(SMALL, 2, chain="paper", matched=False)
+    again = mismatch.run_mismatch(SMALL, 2, chain="paper", matched=False)
     for key, value in again.metrics.items():                      # same seed -> same numbers
         assert value == m[key] or (np.isnan(value) and np.isnan(m[key])), key

@@ -11,8 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from railpaper.engine.linear_gaussian import LinearGaussianBatch
-from railpaper.engine.mcmc import adaptive_metropolis, kalman_log_posterior
+from railpaper.engine import LinearGaussianBatch, adaptive_metropolis, kalman_log_posterior
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
 from railpaper.experiments.rbpf_parameter_estimation.result import steps_reported
 from railpaper.pipeline.outputs import write_outputs

@@ -151,7 +151,7 @@ def test_toy_records_follow_the_documented_draws_and_definitions():
     """run_toy: record i draws from default_rng(seed + i) the simulation, then per initial
     condition the prior, the paper RBPF, the working RBPF (same particles) and the EKF; each
     row's final errors, flags and settle steps recomputed here from the estimators directly."""
-    from railpaper.engine.rbpf import run_rbpf
+    from railpaper.engine import run_rbpf
     from railpaper.estimators.ekf import eq18_model, run_augmented_ekf
     from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
     from railpaper.experiments.rbpf_parameter_estimation.toy import run_toy

@@ -1,5 +1,5 @@
 """Kalman filter and RTS smoother of chapter reduced-order-observer against independent references:
-filterpy's KalmanFilter (batch_filter, rts_smoother), the library's kalman.update/predict, the
+filterpy's KalmanFilter (batch_filter, rts_smoother), the library's engine update/predict, the
 dense Gaussian posterior, scipy's matrix exponential and Lyapunov solver."""
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 from filterpy.kalman import KalmanFilter
 from scipy.linalg import expm
 
-from railpaper.engine import kalman
+from railpaper.engine import predict, update
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
 from railpaper.experiments.reduced_order_observer import experiment as chapter
@@ -80,10 +80,10 @@ def test_compiled_covariance_steps_equal_the_library(toy):
     F, Q, H, R, P0 = (toy[k] for k in ("F", "Q", "H", "R", "P0"))
     P, x = P0, np.zeros(F.shape[0])
     for k in range(10):
-        _, post, _, _, S = kalman.update(x, P, np.zeros(H.shape[0]), H, R)
+        _, post, _, _, S = update(x, P, np.zeros(H.shape[0]), H, R)
         np.testing.assert_allclose(toy["g"].P_post[k, 0], post, rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(toy["g"].K[k, 0], P @ H.T @ np.linalg.inv(S), rtol=1e-11)
-        _, P = kalman.predict(x, post, F, Q)
+        _, P = predict(x, post, F, Q)
 
 
 def test_batch_of_models_equals_one_at_a_time(toy):

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from railpaper.experiments.base import ParameterError
-from railpaper.engine.kalman import predict, update
+from railpaper.engine import predict, update
 from railpaper.experiments.lateral_vehicle import track_velocity
 from railpaper.experiments.suspension_fault_detection import detectors, evidence, faults, records
 from railpaper.experiments.suspension_fault_detection import experiment as chapter
 from railpaper.experiments.suspension_fault_detection.spec import SPEC
-from railpaper.models import lateral_16state as L
+from railpaper.models import lateral_16state
 
 SETTINGS = SPEC.resolve({}, True)
 
@@ -51,7 +51,8 @@ def test_exact_posterior_equals_one_filter_per_hypothesis(setup):
     after = system(values)
 
     def run(switch, v):
-        x, P, ll = np.zeros(L.N_STATES), 1e-10 * np.eye(L.N_STATES), np.empty(K)
+        n = lateral_16state.N_STATES
+        x, P, ll = np.zeros(n), 1e-10 * np.eye(n), np.empty(K)
         for k in range(1, K + 1):
             s, i = (after, v) if switch is not None and k >= switch else (before, 0)
             x, P = predict(x, P, s.F[i], s.Q, s.B[i], short.u_mps[k - 1])
@@ -102,9 +103,10 @@ def test_the_measurement_switches_with_the_fault(setup):
     sub, j = rs.truth_substeps, rec.fault_step - 1
     thetas, starts = faults.schedule(catalogue["ksy_70"], fault_settings, theta, j * sub,
                                      rs.n_steps * sub, rs.dt_s / sub)
-    x = L.simulate_truth_schedule(fixed, thetas, starts, 200 / 3.6, rs.dt_s / sub, dq[:-1])
-    after = L.measurement_matrix(L.build_A_direct(fixed, thetas[1], 200 / 3.6))
-    before = L.measurement_matrix(L.build_A_direct(fixed, theta, 200 / 3.6))
+    x = lateral_16state.simulate_truth_schedule(fixed, thetas, starts, 200 / 3.6, rs.dt_s / sub,
+                                                dq[:-1])
+    after, before = (lateral_16state.measurement_matrix(
+        lateral_16state.build_A_direct(fixed, th, 200 / 3.6)) for th in (thetas[1], theta))
     assert np.allclose(rec.record.y[j], after @ x[(j + 1) * sub], rtol=1e-12, atol=1e-15)
     assert np.allclose(rec.record.y[j - 1], before @ x[j * sub], rtol=1e-12, atol=1e-15)
     assert not np.allclose(rec.record.y[j], before @ x[(j + 1) * sub])
@@ -158,7 +160,7 @@ def test_drift_schedule_ends_at_its_factor(setup):
     fixed, theta, catalogue, fault_settings = setup
     fault = catalogue["csaly_drift"]
     thetas, starts = faults.schedule(fault, fault_settings, theta, 1000, 8000, 5e-4)
-    j = L.PARAM_NAMES.index("csaly")
+    j = lateral_16state.PARAM_NAMES.index("csaly")
     values = np.array([t[j] for t in thetas]) / theta[j]
     assert values[0] == 1.0 and values[-1] == fault.factor and np.all(np.diff(values) < 0)
     assert starts[1] == 1000 and starts[-1] == 1000 + int(round(fault_settings["drift_s"] / 5e-4))
