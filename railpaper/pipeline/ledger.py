@@ -274,14 +274,17 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     path = out / f"records_{study}.csv"
     mine = pd.read_csv(path) if path.exists() else None
     if size is None or (mine is not None and len(mine) >= size) or run is None:
-        return deciding_rows(mine, size), f"this run ({0 if mine is None else len(mine)} records)"
+        count = 0 if mine is None else len(mine)
+        used = f"the first {size} of " if size is not None and count > size else ""
+        return deciding_rows(mine, size), f"this run ({used}{count} records)"
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
     stored = store.read(RecordStudy(chapter, study, rows=None), settings)
     if len(stored) >= size:
         folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
+        used = f"the first {size} of " if len(stored) > size else ""
         return (deciding_rows(stored.drop(columns="commit"), size),
-                f"{folder.relative_to(DATA_DIR.parent)} ({len(stored)} records)")
+                f"{folder.relative_to(DATA_DIR.parent)} ({used}{len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
 
 
