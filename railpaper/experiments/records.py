@@ -124,5 +124,22 @@ def map_in_process(study: RecordStudy, settings: Any, seeds: Sequence[int],
     return normalised(pd.concat(frames, ignore_index=True))
 
 
-__all__ = ["RecordMap", "RecordStudy", "RowsFunction", "checked_rows", "column_types",
-           "map_in_process", "normalised", "read_rows"]
+def assert_chunk_invariant(study: RecordStudy, settings: Any, seeds: Sequence[int]) -> None:
+    """Check that a record's numbers do not depend on its chunk: the rows of ``seeds`` computed
+    as one chunk, one seed at a time and in reverse order must be equal bit for bit (raises
+    ``AssertionError`` naming the first column that differs).  A batch over records that goes
+    through BLAS or numpy's pairwise sums can fail this for a chunk of one record."""
+    seeds = tuple(int(s) for s in seeds)
+    together = study.rows(settings, seeds)
+    alone = pd.concat([study.rows(settings, (s,)) for s in seeds], ignore_index=True)
+    reverse = study.rows(settings, seeds[::-1]).iloc[::-1].reset_index(drop=True)
+    if [int(s) for s in together["seed"]] != list(seeds):
+        raise AssertionError(f"{study.name}: rows for seeds {list(together['seed'])}, "
+                             f"asked {list(seeds)}")
+    for name, other in (("one seed at a time", alone), ("reverse order", reverse)):
+        pd.testing.assert_frame_equal(together, other, check_exact=True,
+                                      obj=f"{study.name} rows, {name}")
+
+
+__all__ = ["RecordMap", "RecordStudy", "RowsFunction", "assert_chunk_invariant", "checked_rows",
+           "column_types", "map_in_process", "normalised", "read_rows"]

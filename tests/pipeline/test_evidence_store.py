@@ -188,3 +188,14 @@ def test_usage_counts_computed_records_only(tmp_path):
     assert record_map.usage["records"] == 5 and record_map.usage["cpu_s"] >= 0.0
     record_map(STUDY, SPEC.resolve(), range(6))                    # five reused, one computed
     assert record_map.usage["records"] == 6
+
+
+def test_assert_chunk_invariant_catches_a_batch_that_changes_bits():
+    from railpaper.experiments.records import assert_chunk_invariant
+
+    def batch_mean(settings, seeds):          # each row's value depends on its chunk
+        values = [float(s) for s in seeds]
+        return pd.DataFrame({"seed": list(seeds), "x_m": [v - np.mean(values) for v in values]})
+    assert_chunk_invariant(STUDY, SPEC.resolve(), (4, 1, 9))
+    with pytest.raises(AssertionError, match="one seed at a time"):
+        assert_chunk_invariant(RecordStudy("demo", "bad", batch_mean), None, (4, 1, 9))

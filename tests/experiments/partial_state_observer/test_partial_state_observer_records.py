@@ -14,7 +14,7 @@ from railpaper.experiments.partial_state_observer import evidence as ev
 from railpaper.experiments.partial_state_observer import experiment as ch
 from railpaper.experiments.partial_state_observer import records
 from railpaper.experiments.partial_state_observer.spec import SPEC
-from railpaper.experiments.records import map_in_process
+from railpaper.experiments.records import assert_chunk_invariant, map_in_process
 
 #: Short runs: a few hundred steps, the error window inside them.
 SMALL = {"duration_s": 0.4, "lead_in_s": 0.05, "error_window_start_s": 0.2,
@@ -33,13 +33,7 @@ def test_a_record_does_not_depend_on_its_chunk(study, speeds):
     """One chunk, one seed at a time and the reverse order give the same bits (one speed is
     the case where a lone seed would be a one-row matrix product)."""
     settings = small(speeds_kmh=speeds)
-    seeds = (7, 3, 12)
-    together = study.rows(settings, seeds)
-    alone = pd.concat([study.rows(settings, (s,)) for s in seeds], ignore_index=True)
-    reverse = study.rows(settings, seeds[::-1]).iloc[::-1].reset_index(drop=True)
-    assert together.seed.tolist() == list(seeds)
-    pd.testing.assert_frame_equal(together, alone, check_exact=True)
-    pd.testing.assert_frame_equal(together, reverse, check_exact=True)
+    assert_chunk_invariant(study, settings, (7, 3, 12))
 
 
 def test_map_in_process_chunk_of_one_equals_default():

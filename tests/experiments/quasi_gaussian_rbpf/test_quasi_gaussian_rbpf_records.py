@@ -9,7 +9,7 @@ import pytest
 
 from railpaper.experiments.quasi_gaussian_rbpf import experiment as chapter
 from railpaper.experiments.quasi_gaussian_rbpf.readings import load_readings
-from railpaper.experiments.records import map_in_process
+from railpaper.experiments.records import assert_chunk_invariant, map_in_process
 from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
 
 #: Small settings: three Monte Carlo records (2, 3, 4), no timing, no readings study.
@@ -21,25 +21,13 @@ def small(**changes):
     return chapter.SPEC.resolve(dict(SMALL, **changes), True)
 
 
-def _rows_by_chunk(study, settings, seeds):
-    """The rows of ``seeds`` as one chunk, one seed at a time, and in reverse one at a time."""
-    together = study.rows(settings, tuple(seeds))
-    alone = pd.concat([study.rows(settings, (s,)) for s in seeds], ignore_index=True)
-    backwards = pd.concat([study.rows(settings, (s,)) for s in reversed(seeds)],
-                          ignore_index=True).iloc[::-1].reset_index(drop=True)
-    return together, alone, backwards
-
-
 @pytest.mark.parametrize("study, changes", [(chapter.MONTE_CARLO, {}),
                                             (chapter.READINGS, dict(grid_size=5))],
                          ids=["monte_carlo", "readings"])
 def test_a_record_does_not_depend_on_its_chunk(study, changes):
     settings = small(**changes)
     seeds = [3, 5, 4]
-    together, alone, backwards = _rows_by_chunk(study, settings, seeds)
-    assert together.seed.tolist() == seeds
-    pd.testing.assert_frame_equal(together, alone, check_exact=True)
-    pd.testing.assert_frame_equal(together, backwards, check_exact=True)
+    assert_chunk_invariant(study, settings, seeds)
     one = map_in_process(dataclasses.replace(study, chunk_records=1), settings, seeds)
     pd.testing.assert_frame_equal(one, map_in_process(study, settings, seeds), check_exact=True)
     pd.testing.assert_frame_equal(

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from railpaper.experiments.records import map_in_process
+from railpaper.experiments.records import assert_chunk_invariant, map_in_process
 from railpaper.experiments.reduced_order_observer import evidence as ev
 from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import kalman as rk
@@ -32,13 +32,7 @@ def test_a_record_does_not_depend_on_its_chunk(study, speeds):
     case where a lone seed is a one-column batch: padded, or numpy would sum its means pairwise
     and step its plant with a matrix-vector product)."""
     settings = small(speeds_kmh=speeds, sweep_speeds_kmh=speeds)
-    seeds = (7, 3, 12)
-    together = study.rows(settings, seeds)
-    alone = pd.concat([study.rows(settings, (s,)) for s in seeds], ignore_index=True)
-    reverse = study.rows(settings, seeds[::-1]).iloc[::-1].reset_index(drop=True)
-    assert together.seed.tolist() == list(seeds)
-    pd.testing.assert_frame_equal(together, alone, check_exact=True)
-    pd.testing.assert_frame_equal(together, reverse, check_exact=True)
+    assert_chunk_invariant(study, settings, (7, 3, 12))
 
 
 @pytest.mark.parametrize("study", [ev.MONTE_CARLO, rk.ESTIMATOR_RECORDS], ids=lambda s: s.name)
