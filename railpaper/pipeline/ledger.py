@@ -47,6 +47,7 @@ from railpaper.pipeline.declarations import (
     decide,
     load_declarations,
     load_registry,
+    revisions,
 )
 from railpaper.pipeline.evidence_store import EvidenceStore
 from railpaper.pipeline.ledger_figure import plot_ledger
@@ -594,9 +595,15 @@ def chapter_markdown(chapter: str, out_dir: str | Path) -> str:
 def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None) -> str:
     """The intro's ledger: one table per chapter, each headed by a link to the chapter's claims."""
     titles = titles or {}
-    revised = sum(bool(r.revised) for r in rows)
-    lines = [f"{headline(rows)} ({len(rows)} rows with the readings). {revised} of the "
-             f"{len(rows)} rules were revised after their numbers were seen.", ""]
+    v2 = [r for r in rows if not r.procedure]
+    revised = sum(bool(r.revised) for r in v2)
+    registry = load_registry()
+    declared = sum(1 for key in registry if key.split("/")[0] in {r.chapter for r in rows})
+    lines = [f"{headline(rows)} ({len(rows)} rows with the readings). Of the {len(v2)} rows "
+             f"still under v2 rules, {revised} were revised after their numbers were seen; of "
+             f"the {declared} rows ever declared under the rulebook, {revisions(registry)} were "
+             "re-registered or dropped since (data/claims_registry.json keeps every earlier "
+             "declaration).", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"
