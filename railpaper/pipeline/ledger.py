@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import re
 from dataclasses import dataclass, replace
@@ -273,20 +274,35 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     ``records_<study>.csv``, or — where the run holds fewer records than the registered
     ``size`` — the stored decisive evidence for the run's settings when it holds enough."""
     path = out / f"records_{study}.csv"
-    mine = pd.read_csv(path) if path.exists() else None
+    mine = _read_csv(str(path), path.stat().st_mtime_ns) if path.exists() else None
     if size is None or (mine is not None and len(mine) >= size) or run is None:
         count = 0 if mine is None else len(mine)
         used = f"the first {size} of " if size is not None and count > size else ""
         return deciding_rows(mine, size), f"this run ({used}{count} records)"
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
-    stored = store.read(RecordStudy(chapter, study, rows=None), settings)
+    rows_file = store.folder(RecordStudy(chapter, study, rows=None), settings) / "rows.csv"
+    stored = _read_store(chapter, study, settings,
+                         rows_file.stat().st_mtime_ns if rows_file.exists() else 0)
     if len(stored) >= size:
         folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
         used = f"the first {size} of " if len(stored) > size else ""
         return (deciding_rows(stored.drop(columns="commit"), size),
                 f"{folder.relative_to(DATA_DIR.parent)} ({used}{len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
+
+
+@functools.lru_cache(maxsize=32)
+def _read_csv(path: str, mtime_ns: int) -> pd.DataFrame:  # noqa: ARG001 - part of the cache key
+    """A run's per-record rows, read once per file version (a page asks for them per row)."""
+    return pd.read_csv(path)
+
+
+@functools.lru_cache(maxsize=32)
+def _read_store(chapter: str, study: str, settings, mtime_ns: int) -> pd.DataFrame:  # noqa: ARG001
+    """The stored decisive rows of a study, read once per file version (000's are 17 MB)."""
+    return EvidenceStore(DECISIVE_EVIDENCE_DIR).read(RecordStudy(chapter, study, rows=None),
+                                                     settings)
 
 
 def deciding_rows(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame | None:
