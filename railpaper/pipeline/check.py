@@ -24,13 +24,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from railpaper.data import DataError, read_toml
-from railpaper.rulebook import Vocabulary
 from railpaper.pipeline.chapters import chapter_spec, default_output_dir
 from railpaper.pipeline.claim_rules import rule_metrics
 from railpaper.pipeline.decisive import check_provenance
 from railpaper.pipeline.declarations import check_registry, load_declarations, load_registry
 from railpaper.pipeline.findings import read_findings
 from railpaper.pipeline.outputs import chapter_data_dir, claims
+from railpaper.rulebook import Vocabulary
 
 
 @dataclass

@@ -175,3 +175,12 @@ def test_a_dropped_row_stays_in_the_registry_marked():
     registry, revised = register([a], VOCABULARY, registry, {}, "2026-12-07")
     assert revised == ["demo/other"] and registry["demo/other"]["dropped"] == "2026-12-07"
     assert revisions(registry) == 1 and check_registry([a], VOCABULARY, registry) == []
+
+
+def test_railpaper_check_fails_on_an_unregistered_or_changed_declaration(monkeypatch):
+    from railpaper.pipeline import check
+    assert check.registry_rows("reduced-order-observer") == []        # as committed
+    monkeypatch.setattr(check, "load_registry", lambda: {})
+    rows = check.registry_rows("reduced-order-observer")
+    assert rows and all(r.status.startswith("FAIL: reduced-order-observer/") for r in rows)
+    assert "not registered in data/claims_registry.json" in rows[0].status
