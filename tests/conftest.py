@@ -135,3 +135,17 @@ def quick_chapter_dir(quick_book):
         assert (out / "metrics.json").exists(), f"the quick book has no run of {chapter}"
         return out
     return folder
+
+
+@pytest.fixture(scope="session")
+def dask_client():
+    """One dask ``LocalCluster`` of two single-threaded worker processes per test process, shared
+    by the tests that check a record map on workers (each cluster costs its workers' start-up:
+    imports and numba's cache, a few CPU-seconds apiece)."""
+    from distributed import Client, LocalCluster
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=":0")
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()

@@ -200,12 +200,14 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
     are left out."""
     vocabulary, registry = Vocabulary.load(), load_registry()
     settings = chapter_spec(chapter).resolve({}, False)
-    store, out = EvidenceStore(root), {}
+    store, out, tables = EvidenceStore(root), {}, {}
     for d in load_declarations(chapter, vocabulary):
         size = registry.get(d.key, {}).get("size")
         if not d.study or not size:
             continue
-        rows = store.read(RecordStudy(chapter, d.study, rows=None), settings)
+        if d.study not in tables:                     # one read per study (000's: 17 MB)
+            tables[d.study] = store.read(RecordStudy(chapter, d.study, rows=None), settings)
+        rows = tables[d.study]
         if len(rows) < size:
             continue
         rows = rows.drop(columns="commit").sort_values("seed", kind="stable").head(size)

@@ -81,15 +81,11 @@ def test_row_columns_and_runs_table_against_single_runs():
                     assert (predicted >= 0) == (name in ("paper", "hb0"))
 
 
-def test_dask_workers_give_the_same_metrics(tmp_path):
-    from distributed import Client, LocalCluster
-
+def test_dask_workers_give_the_same_metrics(tmp_path, dask_client):
     from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
     settings = small(speeds_kmh=[60.0, 120.0], n_seeds=5)
     here = ch.run(settings, record_map=map_in_process)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0") as cluster, Client(cluster) as client:
-        there = ch.run(settings, record_map=stored_map(EvidenceStore(tmp_path), client=client))
+    there = ch.run(settings, record_map=stored_map(EvidenceStore(tmp_path), client=dask_client))
     assert json.dumps(there.metrics, sort_keys=True) == json.dumps(here.metrics, sort_keys=True)
     pd.testing.assert_frame_equal(there.monte_carlo, here.monte_carlo, check_exact=True)
     stored = EvidenceStore(tmp_path).read(records.MONTE_CARLO, settings)

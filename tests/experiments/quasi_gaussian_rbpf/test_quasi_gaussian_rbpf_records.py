@@ -67,15 +67,12 @@ def _same(a: dict, b: dict) -> bool:
         for k in a)
 
 
-def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path):
-    from distributed import Client, LocalCluster
+def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client):
     settings = small(n_monte_carlo=4, readings_records=3, grid_size=7)
     here = chapter.run(settings)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0") as cluster, Client(cluster) as client:
-        store = EvidenceStore(tmp_path)
-        there = chapter.run(settings, record_map=stored_map(store, client=client))
-        again = chapter.run(settings, record_map=stored_map(store, client=client))
+    store = EvidenceStore(tmp_path)
+    there = chapter.run(settings, record_map=stored_map(store, client=dask_client))
+    again = chapter.run(settings, record_map=stored_map(store, client=dask_client))
     assert _same(here.metrics, there.metrics) and _same(here.metrics, again.metrics)
     pd.testing.assert_frame_equal(here.monte_carlo, there.monte_carlo, check_exact=True)
     pd.testing.assert_frame_equal(here.readings.table, there.readings.table, check_exact=True)

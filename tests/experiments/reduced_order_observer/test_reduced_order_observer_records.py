@@ -73,16 +73,12 @@ def test_rows_are_wide_and_the_reduce_gives_back_the_long_tables():
         estimators[rk.error_column("kalman", "sensor", 1e-3, 60.0)].iloc[2]
 
 
-def test_dask_workers_give_the_same_metrics(tmp_path):
-    from distributed import Client, LocalCluster
-
+def test_dask_workers_give_the_same_metrics(tmp_path, dask_client):
     from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
     settings = small()
     here = chapter.run(settings, record_map=map_in_process)
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=":0") as cluster, Client(cluster) as client:
-        there = chapter.run(settings, record_map=stored_map(EvidenceStore(tmp_path),
-                                                            client=client))
+    there = chapter.run(settings, record_map=stored_map(EvidenceStore(tmp_path),
+                                                        client=dask_client))
     again = chapter.run(settings, record_map=stored_map(EvidenceStore(tmp_path)))   # reused
     assert there.metrics == here.metrics == again.metrics
     for name in ("monte_carlo_samples", "estimator_samples",
