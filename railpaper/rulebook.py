@@ -178,11 +178,8 @@ def population_rate(k: int, n: int, threshold: float, direction: str = "at least
     return Decision("undecided", f"{text}: the interval contains it", rate, low, high, n)
 
 
-def relative_change(baseline: Sequence[float], other: Sequence[float],
-                    level: float = 0.95) -> tuple[float, float, float]:
-    """Paired relative change of the means, ``r = mean(B − A) / mean(A)``, with the
-    delta-method interval: ``u_i = (B_i − A_i) − r A_i``, ``se = sd(u) / (√n |mean(A)|)``,
-    ``r ± t_{n−1} se``."""
+def _delta_terms(baseline: Sequence[float], other: Sequence[float]) -> tuple[float, float, float]:
+    """``r = mean(B − A) / mean(A)``, ``sd(u)`` of ``u_i = (B_i − A_i) − r A_i`` and ``mean(A)``."""
     a, b = np.asarray(baseline, dtype=float), np.asarray(other, dtype=float)
     if a.shape != b.shape or a.ndim != 1 or a.size < 2:
         raise ValueError(f"need two paired samples of at least 2 values, got {a.shape}, {b.shape}")
@@ -190,9 +187,25 @@ def relative_change(baseline: Sequence[float], other: Sequence[float],
     if mean_a == 0.0:
         raise ValueError("the baseline's mean is 0: a relative change is undefined")
     r = float(np.mean(b - a)) / mean_a
-    u = (b - a) - r * a
-    se = float(np.std(u, ddof=1)) / (math.sqrt(a.size) * abs(mean_a))
-    t = float(scipy_stats.t.ppf(0.5 + level / 2, a.size - 1))
+    return r, float(np.std((b - a) - r * a, ddof=1)), mean_a
+
+
+def relative_change_sd(baseline: Sequence[float], other: Sequence[float]) -> tuple[float, float]:
+    """``r`` and the per-record standard deviation of its delta-method linearisation,
+    ``sd(u) / |mean(A)|`` (the σ a size by power reads)."""
+    r, sd_u, mean_a = _delta_terms(baseline, other)
+    return r, sd_u / abs(mean_a)
+
+
+def relative_change(baseline: Sequence[float], other: Sequence[float],
+                    level: float = 0.95) -> tuple[float, float, float]:
+    """Paired relative change of the means, ``r = mean(B − A) / mean(A)``, with the
+    delta-method interval: ``u_i = (B_i − A_i) − r A_i``, ``se = sd(u) / (√n |mean(A)|)``,
+    ``r ± t_{n−1} se``."""
+    r, sd_u, mean_a = _delta_terms(baseline, other)
+    n = len(baseline)
+    se = sd_u / (math.sqrt(n) * abs(mean_a))
+    t = float(scipy_stats.t.ppf(0.5 + level / 2, n - 1))
     return r, r - t * se, r + t * se
 
 
@@ -316,4 +329,4 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
 __all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
            "clopper_pearson", "continuous_size", "deterministic", "design", "equivalence",
            "implementation", "mid_rank_tail", "most_favourable", "paired_change",
-           "population_rate", "rate_size", "relative_change", "single_run", "single_run_size"]
+           "population_rate", "rate_size", "relative_change", "relative_change_sd", "single_run", "single_run_size"]

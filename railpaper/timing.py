@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import platform
 import time
 from typing import Callable
 
@@ -53,13 +54,28 @@ def paired_ratio(numerator, denominator) -> dict:
 LOAD_TAU_S = 60.0       # time constant of the kernel's 1-minute load average (an EMA)
 
 
+def machine() -> dict:
+    """What the numbers were measured on: cores, CPU model, Python, numpy and its BLAS, numba and
+    its threads (a benchmark's payload, the decisive evidence's provenance)."""
+    import numba                                 # only where a machine is described
+    blas = np.show_config(mode="dicts").get("Build Dependencies", {}).get("blas", {})
+    cpu = platform.processor()
+    if os.path.exists("/proc/cpuinfo"):
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")),
+                       cpu)
+    return dict(cores=os.cpu_count(), cpu=cpu, python=platform.python_version(),
+                numpy=np.__version__, blas=f"{blas.get('name', '?')} {blas.get('version', '')}",
+                numba=numba.__version__, numba_threads=numba.get_num_threads())
+
+
 def _own_cpu_s() -> float:
     """CPU seconds of this process (every thread) and its waited-for children."""
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
 
 
-def _machine_busy_s() -> float | None:
+def machine_busy_s() -> float | None:
     """CPU seconds the whole machine spent busy (all cores; user, nice, system, irq, softirq and
     steal — time the hypervisor gave to others), from /proc/stat; None where not available."""
     try:
@@ -85,7 +101,7 @@ class LoadLog:
     def __init__(self, clock: Callable[[], float] = time.monotonic,
                  load: Callable[[], tuple] = os.getloadavg,
                  cpu: Callable[[], float] = _own_cpu_s,
-                 busy: Callable[[], float | None] = _machine_busy_s):
+                 busy: Callable[[], float | None] = machine_busy_s):
         self.clock, self.load, self.cpu, self.busy, self.t0 = clock, load, cpu, busy, clock()
         self.samples: list[dict] = []
         self._last: tuple[float, float, float | None] | None = None

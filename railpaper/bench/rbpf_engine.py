@@ -38,7 +38,7 @@ from railpaper.experiments.rbpf_parameter_estimation import lateral as study
 from railpaper.experiments.rbpf_parameter_estimation.posterior import MIN_MOVES, PROPOSAL
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models import lateral_16state
-from railpaper.timing import LoadLog, interleaved, paired_ratio, rates, summary
+from railpaper.timing import LoadLog, interleaved, machine, paired_ratio, rates, summary
 
 REPEATS = 5                    # alternations of every interleaved comparison (full sizes)
 QUICK_REPEATS = 3              # at quick sizes: the book's Performance page, within its budget
@@ -269,22 +269,6 @@ def peak_memory_mb(N: int, n_steps: int) -> dict:
     per_particle = (3 * n * n + 2 * n * 5 + 2 * n + 2 * 5 + 5) * 8     # x, P, F, H, G, θ (bytes)
     return dict(peak_rss_mb=big, peak_rss_N10_mb=small, particles_mb=big - small,
                 bank_arrays_mb=N * per_particle / 2 ** 20)
-
-
-def machine() -> dict:
-    import platform
-
-    import numba
-    cfg = np.show_config(mode="dicts")
-    blas = cfg.get("Build Dependencies", {}).get("blas", {})
-    cpu = platform.processor()
-    if os.path.exists("/proc/cpuinfo"):
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")),
-                       cpu)
-    return dict(cores=os.cpu_count(), cpu=cpu, python=platform.python_version(),
-                numpy=np.__version__, blas=f"{blas.get('name', '?')} {blas.get('version', '')}",
-                numba=numba.__version__, numba_threads=numba.get_num_threads())
 
 
 def _row(kind: str, engine: str, N: int, steps: int, seconds: list[float], **extra) -> dict:

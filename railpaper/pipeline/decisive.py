@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import datetime
 import json
-import os
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +33,7 @@ from railpaper.pipeline.chapters import PipelineError, chapter_spec
 from railpaper.pipeline.declarations import (
     Declaration,
     decide,
+    first_records,
     load_declarations,
     load_registry,
     register,
@@ -42,7 +41,8 @@ from railpaper.pipeline.declarations import (
     write_registry,
 )
 from railpaper.pipeline.evidence_store import EvidenceStore, current_commit, stored_map
-from railpaper.rulebook import Vocabulary
+from railpaper.rulebook import Vocabulary, relative_change_sd
+from railpaper.timing import machine
 
 #: First seed of the pilot records behind the sizes of continuous statistics: far from every
 #: seed a chapter's run or the decisive evidence uses.
@@ -67,10 +67,8 @@ def pilot_sigma(declaration: Declaration, rows) -> float:
     [A, B], the delta method's ``sd((B − A) − r A) / |mean A|``; for deviations, their sd."""
     if len(declaration.metrics) == 1:
         return float(np.std(rows[declaration.metrics[0]].to_numpy(float), ddof=1))
-    a = rows[declaration.metrics[0]].to_numpy(float)
-    b = rows[declaration.metrics[1]].to_numpy(float)
-    r = float(np.mean(b - a)) / float(np.mean(a))
-    return float(np.std((b - a) - r * a, ddof=1)) / abs(float(np.mean(a)))
+    return relative_change_sd(rows[declaration.metrics[0]].to_numpy(float),
+                              rows[declaration.metrics[1]].to_numpy(float))[1]
 
 
 def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
@@ -108,22 +106,6 @@ def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
                                  date or datetime.date.today().isoformat())
     write_registry(registry)
     return sizes, revised
-
-
-def machine() -> dict[str, Any]:
-    """CPU model, cores, BLAS and versions of the machine that computed the evidence."""
-    cpu = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as handle:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in handle
-                        if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    config = np.show_config(mode="dicts")
-    blas = config.get("Build Dependencies", {}).get("blas", {})
-    return {"cpu": cpu, "cores": os.cpu_count(),
-            "blas": f"{blas.get('name', '?')} {blas.get('version', '')}".strip(),
-            "python": platform.python_version(), "numpy": np.__version__}
 
 
 @dataclass(frozen=True)
@@ -210,8 +192,8 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
         rows = tables[d.study]
         if len(rows) < size:
             continue
-        rows = rows.drop(columns="commit").sort_values("seed", kind="stable").head(size)
-        decision = decide(d, vocabulary, rows.reset_index(drop=True), {}, size)
+        decision = decide(d, vocabulary, first_records(rows.drop(columns="commit"), size), {},
+                          size)
         out[d.id] = {"verdict": decision.verdict, "statistic": decision.statistic,
                      "low": decision.low, "high": decision.high, "n": decision.n}
     return out
@@ -269,5 +251,5 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 
 
 __all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "chapter_studies",
-           "check_provenance", "machine", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
+           "check_provenance", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -285,6 +285,15 @@ def revisions(registry: dict[str, dict[str, Any]]) -> int:
     return sum(1 for entry in registry.values() if entry.get("history") or entry.get("dropped"))
 
 
+def first_records(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame | None:
+    """The records a row is decided on: the first ``size`` by seed (its registered size, fixed
+    before the deciding run), all of them without a size.  A run with more records than that
+    and the stored decisive evidence thus decide on the same records, the same bits."""
+    if rows is None or size is None:
+        return rows
+    return rows.sort_values("seed", kind="stable").head(size).reset_index(drop=True)
+
+
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
            metrics: dict[str, Any], size: int | None = None) -> Decision:
     """The row's verdict by its class's procedure: from the per-record ``rows`` of its study
@@ -367,5 +376,5 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "decide", "fingerprint", "load_declarations", "load_registry", "parse", "register",
-           "registered_size", "revisions", "write_registry"]
+           "decide", "fingerprint", "first_records", "load_declarations", "load_registry", "parse",
+           "register", "registered_size", "revisions", "write_registry"]

@@ -92,6 +92,11 @@ def key_digest(key: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _whole_lines(text: str) -> str:
+    """``text`` without a last line cut short by an interrupted write."""
+    return text if text.endswith("\n") else text[:text.rfind("\n") + 1]
+
+
 def _csv_lines(frame: pd.DataFrame) -> list[str]:
     """The frame's CSV data lines (no header), floats at ``%.17g``."""
     return frame.to_csv(index=False, header=False, float_format="%.17g").splitlines()
@@ -117,9 +122,7 @@ class EvidenceStore:
         if not path.exists():
             return pd.DataFrame({"seed": pd.Series([], dtype="int64"),
                                  "commit": pd.Series([], dtype="object")})
-        text = path.read_text()
-        if not text.endswith("\n"):
-            text = text[:text.rfind("\n") + 1]
+        text = _whole_lines(path.read_text())
         types = json.loads((path.parent / "columns.json").read_text())
         frame = read_rows(text, types)
         return frame.drop_duplicates("seed", keep="first").reset_index(drop=True)
@@ -139,9 +142,9 @@ class EvidenceStore:
         header = ",".join(frame.columns)
         if path.exists():
             text = path.read_text()
-            if not text.endswith("\n"):                 # an interrupted write: drop its line
-                path.write_text(text[:text.rfind("\n") + 1])
-            stored_header = path.read_text().split("\n", 1)[0]
+            if _whole_lines(text) != text:              # an interrupted write: drop its line
+                path.write_text(_whole_lines(text))
+            stored_header = text.split("\n", 1)[0]
             if stored_header != header:
                 raise EvidenceStoreError(
                     f"evidence store {folder}: its columns differ from this code's rows (remove "

@@ -46,6 +46,7 @@ from railpaper.pipeline.claim_rules import (
 from railpaper.pipeline.declarations import (
     Declaration,
     decide,
+    first_records,
     load_declarations,
     load_registry,
     revisions,
@@ -278,7 +279,7 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     if size is None or (mine is not None and len(mine) >= size) or run is None:
         count = 0 if mine is None else len(mine)
         used = f"the first {size} of " if size is not None and count > size else ""
-        return deciding_rows(mine, size), f"this run ({used}{count} records)"
+        return first_records(mine, size), f"this run ({used}{count} records)"
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
     rows_file = store.folder(RecordStudy(chapter, study, rows=None), settings) / "rows.csv"
@@ -287,7 +288,7 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     if len(stored) >= size:
         folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
         used = f"the first {size} of " if len(stored) > size else ""
-        return (deciding_rows(stored.drop(columns="commit"), size),
+        return (first_records(stored.drop(columns="commit"), size),
                 f"{folder.relative_to(DATA_DIR.parent)} ({used}{len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
 
@@ -303,15 +304,6 @@ def _read_store(chapter: str, study: str, settings, mtime_ns: int) -> pd.DataFra
     """The stored decisive rows of a study, read once per file version (000's are 17 MB)."""
     return EvidenceStore(DECISIVE_EVIDENCE_DIR).read(RecordStudy(chapter, study, rows=None),
                                                      settings)
-
-
-def deciding_rows(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame | None:
-    """The records a row is decided on: the first ``size`` by seed (its registered size, fixed
-    before the deciding run), all of them without a size.  A run with more records than that
-    and the stored decisive evidence thus decide on the same records, the same bits."""
-    if rows is None or size is None:
-        return rows
-    return rows.sort_values("seed", kind="stable").head(size).reset_index(drop=True)
 
 
 def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | None,

@@ -17,13 +17,13 @@ import os
 import statistics
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from railpaper.experiments import load_chapter
 from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.decisive import DECISIVE_DIR
 from railpaper.pipeline.evidence_store import stored_map
 from railpaper.pipeline.sweep import close_client, make_client
+from railpaper.timing import machine_busy_s
 
 #: Share of a study's records the benchmark computes.
 SUBSET_SHARE = 0.05
@@ -66,16 +66,6 @@ def _default_records(settings) -> int:
     return MIN_RECORDS
 
 
-def _busy_s() -> float:
-    """Busy CPU seconds of the whole machine (``/proc/stat``), 0 where unknown."""
-    try:
-        fields = [int(x) for x in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
-    except OSError:
-        return 0.0
-    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
-    return (sum(fields) - idle) / os.sysconf("SC_CLK_TCK")
-
-
 def time_once(work: Work, workers: int) -> dict:
     """One timing of ``work`` on a fresh cluster of ``workers``."""
     study = {s.name: s for s in load_chapter(work.chapter).STUDIES}[work.study]
@@ -85,10 +75,10 @@ def time_once(work: Work, workers: int) -> dict:
         record_map = stored_map(None, client=client, commit="bench")
         record_map(study, settings, work.seeds[:study.chunk_records])   # workers warm (imports)
         before = dict(record_map.usage)
-        busy, started = _busy_s(), time.perf_counter()
+        busy, started = machine_busy_s() or 0.0, time.perf_counter()
         record_map(study, settings, work.seeds)
         wall = time.perf_counter() - started
-        busy = _busy_s() - busy
+        busy = (machine_busy_s() or 0.0) - busy
     finally:
         close_client(client, cluster)
     cpu = record_map.usage["cpu_s"] - before["cpu_s"]
