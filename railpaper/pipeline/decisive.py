@@ -80,27 +80,21 @@ def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
     if not rows:
         raise PipelineError(f"chapter '{chapter}' has no data/{chapter}/declarations.toml")
     settings = chapter_spec(chapter).resolve({}, quick)
-    pilots: dict[str, Any] = {}
-    sizes = {}
+    studies, pilots, sizes = chapter_studies(chapter), {}, {}
     for d in rows:
         sigma = None
-        if d.procedure in ("paired-change", "equivalence") and d.study:
-            if d.study not in pilots:
-                study = chapter_studies(chapter)[d.study]
-                pilots[d.study] = map_in_process(study, settings, range(
-                    PILOT_SEED, PILOT_SEED + pilot_records))
-            sigma = pilot_sigma(d, pilots[d.study])
-        if d.study:                    # a declared column the study does not compute: refuse
-            study = chapter_studies(chapter)[d.study] if d.study in chapter_studies(chapter) \
-                else None
-            if study is None:
+        if d.study:
+            if d.study not in studies:
                 raise PipelineError(f"{d.key}: chapter '{chapter}' has no study {d.study!r}")
-            columns = (pilots[d.study] if d.study in pilots
-                       else study.rows(settings, (PILOT_SEED,))).columns
-            absent = [m for m in d.metrics if m not in columns]
-            if absent:
+            if d.study not in pilots:      # once per study: the σ and the columns it has
+                pilots[d.study] = map_in_process(studies[d.study], settings, range(
+                    PILOT_SEED, PILOT_SEED + pilot_records))
+            absent = [m for m in d.metrics if m not in pilots[d.study].columns]
+            if absent:                     # a declared column the study does not compute
                 raise PipelineError(f"{d.key}: study {d.study!r} has no column {absent[0]!r} at "
                                     "the chapter's defaults")
+            if d.procedure in ("paired-change", "equivalence"):
+                sigma = pilot_sigma(d, pilots[d.study])
         sizes[d.key] = registered_size(d, vocabulary, sigma)
     registry, revised = register(rows, vocabulary, load_registry(), sizes,
                                  date or datetime.date.today().isoformat())
