@@ -16,7 +16,7 @@ threshold of a claim's own.
   its interval against the book-wide margin, in the claimed direction;
 * :func:`equivalence` — similarity or absence: two one-sided tests against ±margin;
 * :func:`deterministic`, :func:`design`, :func:`implementation` — exact values, stated checks
-  and rates.
+  and rates; :func:`cost_ratio` — a time ratio or share measured on this machine.
 
 Sample sizes come from power, before the deciding run (:func:`rate_size`,
 :func:`continuous_size`, :func:`single_run_size`).
@@ -300,6 +300,43 @@ def implementation(measured_rate_hz: float | None, required_rate_hz: float | Non
                     f"{source or 'required'}", measured_rate_hz)
 
 
+def cost_ratio(ratio: float, low: float, high: float, direction: str, margin: float,
+               share: bool = False) -> Decision:
+    """A computing-cost claim measured on this machine: a time ratio (other / baseline) or a
+    share of a time (part / whole) with its interval [``low``, ``high``] from paired repeats.
+
+    A ratio is read like a trend on r − 1: for 'decrease', *reproduced* when ``high`` < 1 − m,
+    *differs* when ``low`` ≥ 1 − m, else *undecided*; 'increase' mirrors it about 1 + m.  A
+    ``share`` ('most of the cost') is read like a majority rate: *reproduced* when ``low`` > ½,
+    *differs* when ``high`` ≤ ½, else *undecided*.
+
+    >>> cost_ratio(0.5, 0.45, 0.55, "decrease", 0.1).verdict
+    'reproduced'
+    >>> cost_ratio(0.95, 0.92, 0.98, "decrease", 0.1).verdict
+    'differs'
+    >>> cost_ratio(0.2, 0.15, 0.25, "increase", 0.1, share=True).verdict
+    'differs'
+    """
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {DIRECTIONS}, got {direction!r}")
+    text = f"{ratio:.3g} [{low:.3g}, {high:.3g}] on this machine"
+    if share:
+        bar, beyond, short = 0.5, low > 0.5, high <= 0.5
+        text += "; claimed: more than one half"
+    elif direction == "decrease":
+        bar = 1.0 - margin
+        beyond, short = high < bar, low >= bar
+        text += f"; claimed: below {bar:g}"
+    else:
+        bar = 1.0 + margin
+        beyond, short = low > bar, high <= bar
+        text += f"; claimed: above {bar:g}"
+    verdict = "reproduced" if beyond else "differs" if short else "undecided"
+    tail = {"reproduced": "wholly beyond it", "differs": "wholly short of it",
+            "undecided": "the interval straddles it"}[verdict]
+    return Decision(verdict, f"{text}: {tail}", float(ratio), float(low), float(high))
+
+
 def _z_sum(level: float, power: float) -> float:
     return float(scipy_stats.norm.ppf(0.5 + level / 2) + scipy_stats.norm.ppf(power))
 
@@ -327,6 +364,6 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
 
 
 __all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
-           "clopper_pearson", "continuous_size", "deterministic", "design", "equivalence",
+           "clopper_pearson", "continuous_size", "cost_ratio", "deterministic", "design", "equivalence",
            "implementation", "mid_rank_tail", "most_favourable", "paired_change",
            "population_rate", "rate_size", "relative_change", "relative_change_sd", "single_run", "single_run_size"]

@@ -13,6 +13,7 @@ from railpaper.rulebook import (
     Vocabulary,
     clopper_pearson,
     continuous_size,
+    cost_ratio,
     deterministic,
     design,
     equivalence,
@@ -147,6 +148,26 @@ def test_exact_design_implementation():
     assert implementation(1200.0, 1000.0, "sample rate").verdict == "reproduced"
     assert implementation(800.0, 1000.0).verdict == "differs"
     assert implementation(None, 1000.0).verdict == "undecided"
+
+
+@pytest.mark.parametrize("ratio, low, high, direction, share, verdict", [
+    (0.50, 0.45, 0.55, "decrease", False, "reproduced"),     # wholly below 1 - 0.1
+    (0.88, 0.85, 0.8999, "decrease", False, "reproduced"),   # high just below 0.9
+    (0.92, 0.90, 0.95, "decrease", False, "differs"),        # low exactly at 0.9: short of it
+    (0.90, 0.85, 0.95, "decrease", False, "undecided"),      # straddles 0.9
+    (1.30, 1.20, 1.40, "decrease", False, "differs"),        # the opposite direction
+    (1.20, 1.1001, 1.3, "increase", False, "reproduced"),
+    (1.05, 1.00, 1.10, "increase", False, "differs"),        # high exactly at 1.1
+    (0.60, 0.5001, 0.7, "increase", True, "reproduced"),     # a share above one half
+    (0.40, 0.30, 0.50, "increase", True, "differs"),         # high exactly at one half
+    (0.50, 0.40, 0.60, "increase", True, "undecided"),
+])
+def test_cost_ratio_boundaries(ratio, low, high, direction, share, verdict):
+    decision = cost_ratio(ratio, low, high, direction, 0.1, share=share)
+    assert decision.verdict == verdict
+    assert (decision.statistic, decision.low, decision.high) == (ratio, low, high)
+    with pytest.raises(ValueError):
+        cost_ratio(0.5, 0.4, 0.6, "sideways", 0.1)
 
 
 def test_sizes_from_power_by_hand():

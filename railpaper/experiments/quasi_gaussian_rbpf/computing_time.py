@@ -193,7 +193,8 @@ def _timing(settings: Settings, make_filter: Callable, filters: tuple[str, ...],
     timings : dict
         ``seconds_per_step_<f>_N<n>``, ``time_ratio_qgrbpf_over_rbpf[_N<n>]`` (curves, at
         ``n_particles`` without suffix), ``time_saving_qgrbpf_vs_rbpf_percent``,
-        ``resampling_share_of_rbpf_step_N<n>`` and :func:`paired_metrics`.
+        ``resampling_share_of_rbpf_step_N<n>``, ``steps_per_second_<f>`` (Hz: filter steps per
+        second at ``n_particles``, the rate an online filter sustains) and :func:`paired_metrics`.
     curves : DataFrame
         ``filter, n_particles, seconds_per_step``.
     samples : DataFrame
@@ -225,6 +226,8 @@ def _timing(settings: Settings, make_filter: Callable, filters: tuple[str, ...],
         f"time_ratio_qgrbpf_over_rbpf_N{settings.n_particles}"]
     timings["time_saving_qgrbpf_vs_rbpf_percent"] = 100.0 * (
         1.0 - timings["time_ratio_qgrbpf_over_rbpf"])
+    for name in filters:                   # the rate an online filter sustains at the paper's N
+        timings[f"steps_per_second_{name}"] = 1.0 / per.loc[settings.n_particles, name]
     progress(0.98, f"paired timing N={settings.timing_ratio_particles}")
     samples = paired_samples(settings, make_filter, y)
     timings.update(paired_metrics(samples))

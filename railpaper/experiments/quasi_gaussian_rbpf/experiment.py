@@ -41,7 +41,11 @@ from railpaper.experiments.base import (
     default_progress,
 )
 from railpaper.experiments.quasi_gaussian_rbpf.computing_time import operation_metrics, timing
-from railpaper.experiments.quasi_gaussian_rbpf.evidence import monte_carlo_metrics
+from railpaper.experiments.quasi_gaussian_rbpf.evidence import (
+    Z_SATISFACTORY,
+    accuracy_gain,
+    monte_carlo_metrics,
+)
 from railpaper.experiments.quasi_gaussian_rbpf.readings import (
     load_readings,
     readings_rows,
@@ -193,7 +197,29 @@ def record_metrics(settings: Settings, rep: OneRecord) -> dict:
             est = run.theta_mean[:, j]
             m[f"final_error_{par}_{name}"] = est[-1] - truth[j]
             m[f"final_z_{par}_{name}"] = (est[-1] - mean[-1]) / std[-1]
-    return m
+    return dict(m, **derived_columns(m, truth))
+
+
+def derived_columns(m: dict, truth) -> dict:
+    """The per-record columns a declaration reads directly, from the record's ``m``:
+    ``abs_final_error_<p>_<f>`` (|final error|, 1), ``worst_abs_final_z_<f>`` (max over a and b
+    of |final z|, posterior std), ``satisfactory_<f>`` (that at most 2: the filter ends within two
+    posterior std on both parameters) and ``accuracy_gain_pct_<p>_<q>`` (the paper's accuracy gain
+    of Q-GRBPF reading ``q`` over the RBPF, :func:`~railpaper.experiments.quasi_gaussian_rbpf.
+    evidence.accuracy_gain`, percentage points of the truth)."""
+    out = {}
+    for j, par in enumerate(PARAMS):
+        for name in FILTERS + ("posterior",):
+            out[f"abs_final_error_{par}_{name}"] = abs(m[f"final_error_{par}_{name}"])
+    for name in FILTERS + tuple(q + NO_THRESHOLD for q in QGRBPF_READINGS):
+        out[f"worst_abs_final_z_{name}"] = max(abs(m[f"final_z_{par}_{name}"]) for par in PARAMS)
+    for name in FILTERS:
+        out[f"satisfactory_{name}"] = bool(out[f"worst_abs_final_z_{name}"] <= Z_SATISFACTORY)
+    for q in QGRBPF_READINGS:
+        for j, par in enumerate(PARAMS):
+            out[f"accuracy_gain_pct_{par}_{q}"] = float(accuracy_gain(
+                m[f"final_error_{par}_rbpf"], m[f"final_error_{par}_{q}"], truth[j]))
+    return out
 
 
 def record_row(settings: Settings, rep: OneRecord) -> dict:
