@@ -340,10 +340,10 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     if d.procedure == "implementation":
         if d.paper_rate_hz is not None or not d.direction:
             return rulebook.implementation(values[0] if values else None, d.paper_rate_hz)
-        bounds = [metrics.get(f"{d.metrics[0]}_{end}") for end in ("low", "high")]
-        if values[0] is None or None in bounds:
-            return Decision("undecided", f"the run has no metric {d.metrics[0]!r} with an "
-                            "interval (_low, _high)")
+        if values[0] is None:
+            return Decision("undecided", f"the run has no metric {d.metrics[0]!r}")
+        bounds = [metrics.get(f"{d.metrics[0]}_{end}", values[0]) for end in ("low", "high")]
+        # an exact metric (a count of operations) has no interval: its value is both ends
         return rulebook.cost_ratio(float(values[0]), float(bounds[0]), float(bounds[1]),
                                    d.direction, entry.get("margin", 0.0),
                                    share="share" in d.metrics[0])

@@ -14,9 +14,9 @@ Convergence is judged against the exact posterior: a filter "converges at step k
 step k on its estimate stays within two posterior standard deviations of the posterior mean
 (−1: outside at the last step).  For comparison with the paper we also report the first step at
 which the estimate gets within ``tolerance_to_truth`` of the true value.  The same is repeated
-for ``n_monte_carlo`` records (record ``record`` is the main record, computed here in full; the
-others, ``record + 1`` on, are the study :data:`MONTE_CARLO`: one row per record, mapped by the
-caller's record map, in this process by default); the exact posterior's readings study is the
+for ``n_monte_carlo`` records, the study :data:`MONTE_CARLO` (one row per record from record
+``record`` on; the main record ``record`` is computed here in full and gives its row, the
+others are mapped by the caller's record map, in this process by default); the exact posterior's readings study is the
 study :data:`READINGS`.  The statistics the claim rules read are computed from the table of rows
 (the reduce) by :mod:`~railpaper.experiments.quasi_gaussian_rbpf.evidence`; the computing times
 (curves over N and paired repeats at the paper's N) by
@@ -239,8 +239,9 @@ def monte_carlo_rows(settings: Settings, seeds: Sequence[int]) -> pd.DataFrame:
 #: The Monte Carlo records: one row per record (column ``seed`` = record index, the settings'
 #: ``seed`` staying in the settings), a record at a time as the chapter always ran them.
 def first_monte_carlo_record(settings: Settings) -> int:
-    """The Monte Carlo records follow the main record."""
-    return settings.record + 1
+    """The Monte Carlo records start at the main record (computed in full by the chapter, its
+    row the same as the study's)."""
+    return settings.record
 
 
 def first_readings_record(settings: Settings) -> int:  # noqa: ARG001 - RecordStudy signature
@@ -330,7 +331,7 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> QuasiGaussianRB
     main = replicate(settings, settings.record)
     first = record_row(settings, main)
     mc_table = normalised(pd.DataFrame([first]))
-    first_record = MONTE_CARLO.first(settings)
+    first_record = MONTE_CARLO.first(settings) + 1          # after the main record
     records = list(range(first_record, first_record + settings.n_monte_carlo - 1))
     if records:
         others = record_map(MONTE_CARLO, settings, records,
@@ -362,8 +363,9 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> QuasiGaussianRB
     progress(1.0, "done")
     return QuasiGaussianRBPFResult(
         metrics=metrics, timings=timings, timeseries=_timeseries(main),
-        extra_tables=dict({"monte_carlo": mc_table},
-                          **({} if readings is None else {"readings": readings.table}),
+        extra_tables=dict({"records_monte_carlo": mc_table},
+                          **({} if readings is None else {"readings": readings.table,
+                                                          "records_readings": rows}),
                           **({} if timing_samples is None else {"timing_samples": timing_samples})),
         main=main, monte_carlo=mc_table,
         computing_time=(None if timing_table is None

@@ -1,13 +1,14 @@
 """Chapter ``rbpf-parameter-estimation`` (paper 003, Ding et al. 2014): RBPF versus augmented
 EKF, on the Eq. (18) toy and the 16-state lateral vehicle, with the exact posterior beside.
 
-``SPEC`` (the chapter's parameters), ``Settings`` (their typed values), ``validate(settings)``
-and ``run(settings, progress=None)`` are what the pipeline needs; the modules of the package are
-the chapter's parts (``experiment`` is the whole computation, ``figures`` and ``tables`` draw
-from its result).
+``SPEC`` (the chapter's parameters), ``Settings`` (their typed values), ``validate(settings)``,
+``run(settings, progress=None, record_map=...)`` and ``STUDIES`` (its per-record studies, which
+the evidence store and the decisive run compute) are what the pipeline needs; the modules of the
+package are the chapter's parts (``experiment`` is the whole computation, ``figures`` and
+``tables`` draw from its result).
 """
 
-from railpaper.experiments.rbpf_parameter_estimation.experiment import run, validate
+from railpaper.experiments.rbpf_parameter_estimation.experiment import STUDIES, run, validate
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
 
-__all__ = ["SPEC", "Settings", "run", "validate"]
+__all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]

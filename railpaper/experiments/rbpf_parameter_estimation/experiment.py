@@ -47,11 +47,15 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     RbpfParameterEstimationResult,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
-from railpaper.experiments.rbpf_parameter_estimation.toy import TOY_INITS, run_toy
+from railpaper.experiments.rbpf_parameter_estimation.toy import TOY, TOY_INITS, run_toy
+from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 
-__all__ = ["SPEC", "Settings", "run", "validate"]
+#: The chapter's per-record studies: the toy's records, and each lateral RBPF scheme's.
+STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME)
+
+__all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
 
 
 def validate(settings: Settings) -> None:
@@ -97,20 +101,25 @@ def validate(settings: Settings) -> None:
         read_measurements(settings.measurements_csv, settings.dt_s)
 
 
-def run(settings: Settings, *, progress=None) -> RbpfParameterEstimationResult:
+def run(settings: Settings, *, progress=None,
+        record_map: RecordMap = map_in_process) -> RbpfParameterEstimationResult:
     """The whole chapter for ``settings`` (see :data:`SPEC`), on one numba and one OpenBLAS
-    thread (:func:`railpaper.threads.one_thread`)."""
+    thread (:func:`railpaper.threads.one_thread`).  ``record_map(study, settings, seeds,
+    progress)`` computes the rows of the per-record studies (:data:`STUDIES`: the toy's records
+    after the illustrated one, and each lateral RBPF scheme's records after the first
+    ``n_records``); default: in this process."""
     progress = progress or default_progress()
     validate(settings)
     with one_thread():
-        return _run(settings, progress)
+        return _run(settings, progress, record_map)
 
 
-def _run(settings: Settings, progress) -> RbpfParameterEstimationResult:
+def _run(settings: Settings, progress, record_map: RecordMap) -> RbpfParameterEstimationResult:
     metrics, timings = {}, {}
     progress(0.02, "toy")
     t0 = time.perf_counter()
-    toy = run_toy(settings)
+    toy = run_toy(settings, record_map,
+                  lambda fraction, message: progress(0.02 + 0.06 * fraction, message))
     timings["toy_s"] = time.perf_counter() - t0
     st = toy.records
     for ic in (1, 2):                                           # the illustrated record
@@ -131,7 +140,7 @@ def _run(settings: Settings, progress) -> RbpfParameterEstimationResult:
     metrics.update(evidence.toy_offset_metrics(toy.records, toy.coverage, toy.truth))
     part, ts, mismatch = None, None, None
     if settings.lateral:
-        part, more, spent = lateral.run_lateral(settings, progress)
+        part, more, spent = lateral.run_lateral(settings, progress, record_map)
         metrics.update(more)
         timings.update(spent)
         ts = lateral.lateral_timeseries(part)
@@ -145,6 +154,10 @@ def _run(settings: Settings, progress) -> RbpfParameterEstimationResult:
     return RbpfParameterEstimationResult(
         metrics=metrics, timings=timings, timeseries=ts,
         extra_tables={"toy_timeseries": toy.table(),
-                      "toy_record": posterior.toy_record_table(toy.record)},
+                      "toy_record": posterior.toy_record_table(toy.record),
+                      "records_toy": toy.rows,
+                      **({} if part is None or part.paper_scheme_rows.empty else
+                         {"records_lateral_paper_scheme": part.paper_scheme_rows,
+                          "records_lateral_working_scheme": part.working_scheme_rows})},
         extra_files={"toy_posterior.json": posterior.toy_posterior_json(settings, toy.posterior)},
         toy=toy, lateral=part, mismatch=mismatch)

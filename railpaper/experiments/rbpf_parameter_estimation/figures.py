@@ -89,13 +89,14 @@ def critical_speed(result, settings: Settings):
 
 
 def normalised_estimates(result, settings: Settings):
-    """Top: one record's normalised estimates with the range over records, per scheme. Bottom:
-    every record's largest relative error (log), with the 0-0.35 s window shaded."""
+    """Top: one record's normalised estimates with the range over the records kept in full (the
+    first ``n_records``; the records a scheme filtered alone keep only their rows), per scheme.
+    Bottom: each of those records' largest relative error (log), the 0-0.35 s window shaded."""
     lateral, t = result.lateral, result.lateral.t_s
     fig, axes = plt.subplots(2, 2, figsize=(7, 7), sharex=True, sharey="row")
     for col, scheme in enumerate(("working", "paper")):
         ax, ax_err = axes[0, col], axes[1, col]
-        stack = getattr(lateral, f"{scheme}_scheme_norm")()       # every record, (R, K, 5)
+        stack = lateral.stack(f"rbpf_{scheme}_norm")   # the records kept in full, (R, K, 5)
         for j, name in enumerate(PARAM_NAMES):
             ax.plot(t, stack[0, :, j], color=f"C{j}", lw=1.1, label=PARAM_LABELS[name])
             ax.fill_between(t, stack[:, :, j].min(0), stack[:, :, j].max(0), color=f"C{j}",
@@ -105,7 +106,7 @@ def normalised_estimates(result, settings: Settings):
         worst = np.abs(stack - 1).max(axis=2)                       # (records, K)
         ax_err.semilogy(t, worst.T, color="C3" if scheme == "paper" else "C2", lw=0.6, alpha=0.6)
         ax_err.axhline(0.05, color="k", lw=1, label="5 %")
-        ax_err.set(xlabel="time (s)", title=f"{SCHEMES[scheme]}: every record")
+        ax_err.set(xlabel="time (s)", title=f"{SCHEMES[scheme]}: {len(stack)} records")
         for a in (ax, ax_err):
             a.axvspan(0, WINDOW_S, color="0.93", zorder=0)
             a.axvline(WINDOW_S, color="k", ls=":", lw=1)
@@ -141,7 +142,7 @@ def final_errors_over_records(result, settings: Settings):
     fig, axes = plt.subplots(1, 2, figsize=(7, 3.8), sharey=True)
     for ax, (scheme, suffix) in zip(axes, (("paper", "_paper_scheme"),
                                            ("working", "_working_scheme"))):
-        finals = getattr(lateral, f"{scheme}_scheme_norm")()[:, -1] - 1   # every record
+        finals = lateral.final_relative_errors(scheme)              # every record, (R, 5)
         for j, name in enumerate(PARAM_NAMES):
             ax.scatter(np.full(len(finals), j) + np.linspace(-0.2, 0.2, len(finals)),
                        finals[:, j], s=9, color=f"C{j}", alpha=0.7)

@@ -42,10 +42,14 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
 from railpaper.models import lateral_16state
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.settling import holds_from, settling_step
+from railpaper.threads import one_thread
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
 
 WITHIN = 0.05
+#: The paper's claim: every parameter within :data:`WITHIN` after this many steps.
+CLAIM_STEP = 350
 
 
 def lateral_record(settings: Settings, fixed: dict, theta: np.ndarray, seed: int
@@ -151,38 +155,76 @@ def critical_speeds(fixed: dict, theta: np.ndarray, settings: Settings
     return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves}), metrics
 
 
-def lateral_metrics(runs: list[np.ndarray], suffix: str, start: int = 350,
-                    tol: float = 0.05) -> dict:
-    """Evidence metrics of one RBPF scheme on the lateral records.
+def scheme_row(seed: int, norm: np.ndarray, start: int = CLAIM_STEP, tol: float = WITHIN
+               ) -> dict:
+    """One record's row of a scheme's study from its normalised estimates ``norm`` = θ̂/θ
+    (K, 5): ``within_5pct_from_350`` (every parameter within ``tol`` at every step from
+    ``start`` to the end), ``within_5pct_at_350`` (at step ``start``), and
+    ``final_relative_error_<param>`` (θ̂/θ − 1 at the last step, 1)."""
+    with np.errstate(invalid="ignore"):
+        at = bool(np.all(np.abs(norm[start - 1] - 1.0) <= tol))
+    row = {"seed": int(seed),
+           "within_5pct_from_350": bool(holds_from(np.abs(norm - 1.0) <= tol, start).all()),
+           "within_5pct_at_350": at}
+    row.update({f"final_relative_error_{name}": float(norm[-1, j] - 1.0)
+                for j, name in enumerate(lateral_16state.PARAM_NAMES)})
+    return row
 
-    Parameters
-    ----------
-    runs : list of ndarray, each (K, d)
-        Normalised estimates θ̂/θ of every record (same K).
-    suffix : str
-        Appended to every metric name (e.g. ``"_paper_scheme"``).
-    start, tol : int, float
-        The paper's claim: every parameter within ``tol`` after ``start`` steps.
+
+def scheme_rows(settings: Settings, seeds, scheme: str) -> pd.DataFrame:
+    """:func:`scheme_row` of the ``scheme`` RBPF (:func:`lateral_rbpf`) on each simulated
+    record of ``seeds``, one after another on one thread."""
+    fixed, theta = vehicle()
+    rows = []
+    with one_thread():
+        for seed in seeds:
+            record = lateral_record(settings, fixed, theta, int(seed))
+            system = record_system(settings, fixed, theta, record)
+            run = lateral_rbpf(settings, system, record, theta, int(seed), scheme)
+            rows.append(scheme_row(int(seed), run.theta_mean / theta))
+    return pd.DataFrame(rows)
+
+
+def paper_scheme_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`PAPER_SCHEME`'s rows: :func:`scheme_rows` of the paper's scheme."""
+    return scheme_rows(settings, seeds, "paper")
+
+
+def working_scheme_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`WORKING_SCHEME`'s rows: :func:`scheme_rows` of our working scheme."""
+    return scheme_rows(settings, seeds, "working")
+
+
+#: The paper-scheme RBPF on records ``seed`` … ``seed + paper_records − 1``: one row per record.
+PAPER_SCHEME = RecordStudy("rbpf-parameter-estimation", "lateral_paper_scheme",
+                           paper_scheme_rows, chunk_records=1)
+#: Our working-scheme RBPF on records ``seed`` … ``seed + working_records − 1``.
+WORKING_SCHEME = RecordStudy("rbpf-parameter-estimation", "lateral_working_scheme",
+                             working_scheme_rows, chunk_records=1)
+
+
+def lateral_metrics(rows: pd.DataFrame, suffix: str) -> dict:
+    """Evidence metrics of one RBPF scheme from its study's rows (:func:`scheme_row`, one per
+    record, in record order).
 
     Returns
     -------
     dict
-        ``lateral_within_5pct_from_350_rate``: records with every parameter within ``tol`` at
-        every step from ``start`` to the end; ``lateral_within_5pct_at_350_rate``: at step
-        ``start`` alone; ``lateral_bias_max_abs``: largest |mean final relative error| over the
+        ``lateral_within_5pct_from_350_rate``: records with every parameter within 5 % at
+        every step from 350 to the end; ``lateral_within_5pct_at_350_rate``: at step 350
+        alone; ``lateral_bias_max_abs``: largest |mean final relative error| over the
         parameters (simultaneous interval, :func:`max_abs_bias`); ``lateral_median_final_abs_
         error_max``: median over records of the largest final |relative error| — each with
         ``_low``, ``_high``, ``_n`` — and per parameter ``lateral_bias_<j>`` (mean final
-        relative error, 95 % t interval).
+        relative error, 95 % t interval); every name ends in ``suffix``.
     """
-    stack = np.array(runs, float)
-    finals = stack[:, -1] - 1.0
+    finals = rows[[f"final_relative_error_{name}"
+                   for name in lateral_16state.PARAM_NAMES]].to_numpy(float)
     out = {}
-    out.update(rate([holds_from(np.abs(r - 1.0) <= tol, start).all() for r in stack])
+    out.update(rate(rows["within_5pct_from_350"].to_numpy(bool))
                .metrics(f"lateral_within_5pct_from_350_rate{suffix}"))
-    with np.errstate(invalid="ignore"):
-        at = np.all(np.abs(stack[:, start - 1] - 1.0) <= tol, axis=1)
-    out.update(rate(at).metrics(f"lateral_within_5pct_at_350_rate{suffix}"))
+    out.update(rate(rows["within_5pct_at_350"].to_numpy(bool))
+               .metrics(f"lateral_within_5pct_at_350_rate{suffix}"))
     out.update(max_abs_bias(finals).metrics(f"lateral_bias_max_abs{suffix}"))
     out.update(median_interval(np.abs(finals).max(axis=1))
                .metrics(f"lateral_median_final_abs_error_max{suffix}"))
@@ -191,7 +233,8 @@ def lateral_metrics(runs: list[np.ndarray], suffix: str, start: int = 350,
     return out
 
 
-def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
+def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_process
+                ) -> tuple[LateralPart, dict, dict]:
     """Part 2: critical speed, both RBPF schemes and one EKF guess on every record (the first:
     ``ekf_guesses`` and the CRLB), the exact posterior (IBIS) on the first ``ibis_records``.
     Returns the part, its metrics and its timings (s)."""
@@ -244,25 +287,28 @@ def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
                                fr["paper"].theta_std / theta, fr["working"].theta_std / theta,
                                post))
     # records n_records … paper_records - 1 (paper scheme) and … working_records - 1 (working
-    # scheme): each scheme's claims need more records than the other estimators
-    alone = {"paper": [], "working": []}
-    wanted = {"paper": settings.paper_records, "working": settings.working_records}
-    extra = max(wanted.values()) - n_records
-    if not user:
-        for i in range(n_records, n_records + extra):             # none if both are <= n
-            schemes = [s for s in ("working", "paper") if i < wanted[s]]
-            progress(0.7 + 0.2 * (i - n_records) / extra,
-                     f"lateral record {i}, {' and '.join(schemes)} scheme alone")
-            seed = settings.seed + i
-            rec = lateral_record(settings, fixed, theta, seed)
-            system = record_system(settings, fixed, theta, rec)
-            for scheme in schemes:
-                t0 = time.perf_counter()
-                fr = lateral_rbpf(settings, system, rec, theta, seed, scheme)
-                spent[scheme] += time.perf_counter() - t0
-                alone[scheme].append(fr.theta_mean / theta)
+    # scheme): each scheme's claims need more records than the other estimators; they are the
+    # rows of its study, mapped by the caller's record map
+    scheme_tables = {}
+    for scheme, study, wanted in (("paper", PAPER_SCHEME, settings.paper_records),
+                                  ("working", WORKING_SCHEME, settings.working_records)):
+        if user:                                          # no truth: no per-record rows
+            scheme_tables[scheme] = pd.DataFrame({"seed": pd.Series([], dtype="int64")})
+            continue
+        field = "rbpf_paper_norm" if scheme == "paper" else "rbpf_working_norm"
+        first = normalised(pd.DataFrame([scheme_row(r.seed, getattr(r, field)) for r in runs]))
+        if wanted > n_records:
+            progress(0.7, f"lateral records {n_records}-{wanted - 1}, {scheme} scheme alone")
+            t0 = time.perf_counter()
+            more = record_map(study, settings, range(settings.seed + n_records,
+                                                     settings.seed + wanted),
+                              lambda fraction, message: progress(0.7 + 0.2 * fraction, message))
+            spent[scheme] += time.perf_counter() - t0
+            first = pd.concat([first, more], ignore_index=True)
+        scheme_tables[scheme] = first
     for scheme in ("working", "paper"):
-        timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / (n_records + len(alone[scheme]))
+        timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / max(len(scheme_tables[scheme]),
+                                                                   n_records)
     timings["ibis_lateral_per_run_s"] = spent["ibis"] / n_ibis
     for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
         norm = getattr(runs[0], field)                          # the illustrated record
@@ -278,14 +324,11 @@ def run_lateral(settings: Settings, progress) -> tuple[LateralPart, dict, dict]:
     t_s = np.arange(1, n_steps + 1) * settings.dt_s
     part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
                        critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count,
-                       paper_only_norm=np.array(alone["paper"]).reshape(-1, len(t_s), theta.size),
-                       working_only_norm=np.array(alone["working"]).reshape(-1, len(t_s),
-                                                                            theta.size))
+                       paper_scheme_rows=scheme_tables["paper"],
+                       working_scheme_rows=scheme_tables["working"])
     if not user:
-        metrics.update(lateral_metrics(list(part.paper_scheme_norm()), "_paper_scheme", start=350,
-                                       tol=WITHIN))
-        metrics.update(lateral_metrics(list(part.working_scheme_norm()), "_working_scheme",
-                                       start=350, tol=WITHIN))
+        metrics.update(lateral_metrics(part.paper_scheme_rows, "_paper_scheme"))
+        metrics.update(lateral_metrics(part.working_scheme_rows, "_working_scheme"))
         metrics.update(rate(ekf_first).metrics("lateral_ekf_converge_rate"))
     metrics.update(posterior.lateral_metrics(part, simulated=not user))
     return part, metrics, timings

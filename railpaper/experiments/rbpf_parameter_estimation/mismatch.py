@@ -227,8 +227,9 @@ def plant_metrics(rows: pd.DataFrame, runs: list, ekf_first: list, suffix: str,
                .metrics(f"lateral_ekf_converge_rate{suffix}"))
     out.update(rate(rows.rbpf_all_within.to_numpy(bool))
                .metrics(f"lateral_all_within_5pct_fraction{suffix}"))
-    out.update(lateral.lateral_metrics(runs, f"_working_scheme{suffix}", start=START,
-                                  tol=lateral.WITHIN))
+    out.update(lateral.lateral_metrics(pd.DataFrame([lateral.scheme_row(seed, norm, START)
+                                                     for seed, norm in zip(rows.seed, runs)]),
+                                       f"_working_scheme{suffix}"))
     return out
 
 

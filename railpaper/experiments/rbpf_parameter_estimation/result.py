@@ -31,6 +31,7 @@ import pandas as pd
 
 from railpaper.experiments.base import ChapterResult
 from railpaper.experiments.lateral_vehicle import LateralRecord
+from railpaper.models.lateral_16state import PARAM_NAMES
 
 
 # ----------------------------------------------------------------------------- exact posterior
@@ -144,6 +145,9 @@ class ToyPart:
         One row per (record, parameter) of the records the exact posterior was computed on:
         ``seed``, ``parameter`` (x1..x4), ``truth``, ``posterior_q05``, ``posterior_q95``,
         ``posterior_covers``, ``paper_covers``, ``tempered_covers`` (initial condition 1).
+    rows : DataFrame
+        The same records as the study ``toy``'s rows: one wide row per record (``seed``, then
+        the columns above suffixed ``_init1``, ``_init2``), as the ledger reads them.
     """
 
     truth: np.ndarray
@@ -154,6 +158,7 @@ class ToyPart:
     record: object | None = None
     posterior: PosteriorRun | None = None
     coverage: pd.DataFrame | None = None
+    rows: pd.DataFrame | None = None
 
     def table(self) -> pd.DataFrame:
         """The illustrated record's estimates per step: column ``step`` (1..K), then
@@ -226,12 +231,14 @@ class LateralPart:
         user's file.
     ekf_converged_count : int or None
         How many of the first record's EKF guesses end within 5 % of every parameter.
-    paper_only_norm : ndarray, shape (paper_records - n_records, K, 5)
-        Normalised paper-scheme estimates θ̂/θ of the records after ``runs`` (seeds
-        ``seed + n_records`` …), filtered by the paper scheme alone: its claims need more
-        records than the other estimators (:meth:`paper_scheme_norm` joins them).
-    working_only_norm : ndarray, shape (working_records - n_records, K, 5)
-        The same for our working scheme (:meth:`working_scheme_norm`).
+    paper_scheme_rows : DataFrame
+        One row per record filtered by the paper-scheme RBPF (seeds ``seed`` … ``seed +
+        paper_records − 1``: those of ``runs``, then the records it filtered alone, its claims
+        needing more records than the other estimators): ``seed``, ``within_5pct_from_350``,
+        ``within_5pct_at_350``, ``final_relative_error_<param>`` (1) — the rows of the study
+        ``lateral_paper_scheme``.  Empty for a user's file.
+    working_scheme_rows : DataFrame
+        The same for our working scheme (``working_records`` records).
     """
 
     fixed: dict
@@ -241,22 +248,16 @@ class LateralPart:
     critical_speed: pd.DataFrame
     crlb: pd.DataFrame | None = None
     ekf_converged_count: int | None = None
-    paper_only_norm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 5)))
-    working_only_norm: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 5)))
+    paper_scheme_rows: pd.DataFrame = field(default_factory=pd.DataFrame)
+    working_scheme_rows: pd.DataFrame = field(default_factory=pd.DataFrame)
 
-    def paper_scheme_norm(self) -> np.ndarray:
-        """The paper scheme's normalised estimates on every record, shape (paper_records, K,
-        5): those of ``runs``, then ``paper_only_norm``."""
-        first = self.stack("rbpf_paper_norm")
-        return np.concatenate([first, self.paper_only_norm]) if len(self.paper_only_norm) \
-            else first
-
-    def working_scheme_norm(self) -> np.ndarray:
-        """Our working scheme's normalised estimates on every record, shape (working_records,
-        K, 5): those of ``runs``, then ``working_only_norm``."""
-        first = self.stack("rbpf_working_norm")
-        return np.concatenate([first, self.working_only_norm]) if len(self.working_only_norm) \
-            else first
+    def final_relative_errors(self, scheme: str) -> np.ndarray:
+        """θ̂/θ − 1 at the last step of every record the ``scheme`` ('paper' or 'working') RBPF
+        filtered, shape (records, 5): from its study's rows, or from ``runs`` on a user's file."""
+        rows = self.paper_scheme_rows if scheme == "paper" else self.working_scheme_rows
+        if len(rows):
+            return rows[[f"final_relative_error_{name}" for name in PARAM_NAMES]].to_numpy(float)
+        return self.stack(f"rbpf_{scheme}_norm")[:, -1] - 1.0
 
     @property
     def illustrated(self) -> LateralRun:

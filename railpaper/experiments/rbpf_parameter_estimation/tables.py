@@ -148,7 +148,7 @@ def caption_values(result, settings: Settings) -> dict[str, str]:
         top = lat.critical_speed.speed_kmh.max()
         out[f"hunting_{key}"] = f"at {v:.0f} km/h" if v > 0 else f"at no speed up to {top:.0f} km/h"
     n, K = len(lat.runs), len(lat.t_s)
-    n_paper, n_working = len(lat.paper_scheme_norm()), len(lat.working_scheme_norm())
+    n_paper, n_working = len(lat.paper_scheme_rows) or n, len(lat.working_scheme_rows) or n
     out.update(lat_records=(f"{n} ({n_paper} for the paper's scheme, {n_working} for ours)"
                             if (n_paper, n_working) != (n, n) else str(n)), lat_steps=str(K),
                least_damped=number(m["least_damped_real_at_speed_per_s"], 3))

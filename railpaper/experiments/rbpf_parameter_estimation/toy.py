@@ -4,7 +4,9 @@ The RBPF exactly as the paper's Steps 1–2.6 (``scheme="paper"``, prior uniform
 condition ± ``toy_prior_halfwidth``), our working scheme beside it (no claim reads it), and an
 augmented-state EKF, each from the paper's initial conditions 1 = (0, 0, 0, 0) and
 2 = (−0.26, 1, 0.24, −0.5).  One record is :func:`simulate` then :func:`filter_record` on one
-generator; :func:`run_toy` does that for records ``seed`` … ``seed + toy_seeds − 1``.
+generator; :func:`run_toy` does that for records ``seed`` … ``seed + toy_seeds − 1``: the
+illustrated record here, the others as the study :data:`TOY` (one row per seed,
+:func:`toy_rows`) through the caller's record map.
 """
 
 from __future__ import annotations
@@ -14,10 +16,13 @@ import pandas as pd
 
 from railpaper.engine import FilterRun, run_rbpf
 from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
+from railpaper.experiments.base import ProgressCallback, no_progress
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
 from railpaper.settling import settling_step
+from railpaper.threads import one_thread
 
 TOY_INITS = {1: np.zeros(4), 2: np.array([-0.26, 1.0, 0.24, -0.5])}
 EKF_BOUND = 1e3       # |x_j| above this: the toy EKF has diverged; its error then counts as this
@@ -120,18 +125,66 @@ def _record_stats(settings: Settings, seed: int, run: ToyRun) -> dict:
                 **signed)
 
 
-def run_toy(settings: Settings) -> ToyPart:
-    """Eq. (18) on records ``seed`` … ``seed + toy_seeds − 1``: record i is
-    :func:`simulate` then :func:`filter_record` from initial conditions 1 and 2, all on
-    ``numpy.random.default_rng(seed + i)``."""
-    stats, illustrated = [], {}
-    for i in range(settings.toy_seeds):
-        rng = np.random.default_rng(settings.seed + i)
-        sim = simulate(settings, rng)
-        for ic in TOY_INITS:
-            run = filter_record(settings, sim, ic, rng)
-            stats.append(_record_stats(settings, settings.seed + i, run))
-            if i == 0:
-                illustrated[ic] = run
+def toy_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The toy study's rows (:data:`railpaper.experiments.rbpf_parameter_estimation.experiment.
+    TOY`): one wide row per seed, :func:`_record_stats` of initial conditions 1 and 2 with their
+    columns suffixed ``_init1``, ``_init2`` (record ``seed`` is :func:`simulate` then
+    :func:`filter_record` from 1 then 2, all on ``numpy.random.default_rng(seed)``)."""
+    with one_thread():
+        return pd.DataFrame([wide_row(seed, [_record_stats(settings, int(seed), run)
+                                             for run in record_runs(settings, int(seed))])
+                             for seed in seeds])
+
+
+def record_runs(settings: Settings, seed: int) -> list[ToyRun]:
+    """Record ``seed`` filtered from initial conditions 1 and 2 (:data:`TOY_INITS`), in order,
+    on one generator."""
+    rng = np.random.default_rng(seed)
+    sim = simulate(settings, rng)
+    return [filter_record(settings, sim, ic, rng) for ic in TOY_INITS]
+
+
+def wide_row(seed: int, stats: list[dict]) -> dict:
+    """One seed's row from its per-initial-condition stats (``init`` dropped, the rest
+    suffixed ``_init<ic>``)."""
+    row = {"seed": seed}
+    for one in stats:
+        ic = one["init"]
+        row.update({f"{k}_init{ic}": v for k, v in one.items() if k not in ("seed", "init")})
+    return row
+
+
+def long_records(wide: pd.DataFrame) -> pd.DataFrame:
+    """The wide rows of :func:`toy_rows` as :attr:`ToyPart.records`: one row per (record,
+    initial condition), seed-major, columns ``seed``, ``init`` and the stats."""
+    parts = []
+    for ic in TOY_INITS:
+        suffix = f"_init{ic}"
+        part = wide[["seed"] + [c for c in wide.columns if c.endswith(suffix)]]
+        part = part.rename(columns={c: c[:-len(suffix)] for c in part.columns if c != "seed"})
+        part.insert(1, "init", ic)
+        parts.append(part.assign(order=np.arange(len(wide)) * len(TOY_INITS) + ic - 1))
+    return (pd.concat(parts, ignore_index=True).sort_values("order", kind="stable")
+            .drop(columns="order").reset_index(drop=True))
+
+
+def run_toy(settings: Settings, record_map: RecordMap = map_in_process,
+            progress: ProgressCallback = no_progress) -> ToyPart:
+    """Eq. (18) on records ``seed`` … ``seed + toy_seeds − 1``: the illustrated record
+    ``seed`` in full here, the others as the rows of the study ``TOY`` through ``record_map``
+    (:func:`toy_rows`)."""
+    runs = record_runs(settings, settings.seed)
+    illustrated = {run.initial_condition: run for run in runs}
+    first = normalised(pd.DataFrame([wide_row(settings.seed, [
+        _record_stats(settings, settings.seed, run) for run in runs])]))
+    wide = first
+    if settings.toy_seeds > 1:
+        others = record_map(TOY, settings, range(settings.seed + 1,
+                                                 settings.seed + settings.toy_seeds), progress)
+        wide = pd.concat([first, others], ignore_index=True)
     return ToyPart(truth=truth(settings), steps=settings.toy_steps, seed=settings.seed,
-                   illustrated=illustrated, records=pd.DataFrame(stats))
+                   illustrated=illustrated, records=long_records(wide), rows=wide)
+
+
+#: The toy's per-record work: one wide row per seed (:func:`toy_rows`), a record at a time.
+TOY = RecordStudy("rbpf-parameter-estimation", "toy", toy_rows, chunk_records=10)

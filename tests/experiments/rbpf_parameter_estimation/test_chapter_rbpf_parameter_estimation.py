@@ -95,8 +95,10 @@ def test_monte_carlo_records_are_consecutive_seeds(quick_result):
     assert [run.seed for run in result.lateral.runs] == list(
         range(settings.seed, settings.seed + settings.n_records))
     assert len(result.lateral.runs) == settings.n_records
-    assert len(result.lateral.paper_only_norm) == settings.paper_records - settings.n_records
-    assert len(result.lateral.working_only_norm) == settings.working_records - settings.n_records
+    assert result.lateral.paper_scheme_rows.seed.tolist() == list(
+        range(settings.seed, settings.seed + settings.paper_records))
+    assert result.lateral.working_scheme_rows.seed.tolist() == list(
+        range(settings.seed, settings.seed + settings.working_records))
     assert result.metrics["lateral_ekf_converge_rate_n"] == settings.n_records
     assert (result.metrics["rb_augmented_state_dim"], result.metrics["rb_particle_dim"]) == (21, 5)
     for name in ("toy_seeds", "n_records", "paper_records", "working_records"):
@@ -342,19 +344,23 @@ def test_each_scheme_runs_on_its_records_and_its_metrics_read_all_of_them(quick_
 
     settings, result = quick_result
     part, m = result.lateral, result.metrics
-    alone_norm = getattr(part, f"{scheme}_only_norm")
+    rows = getattr(part, f"{scheme}_scheme_rows")
     n_total = {"paper": settings.paper_records, "working": settings.working_records}[scheme]
-    extra = n_total - settings.n_records
-    assert extra > 0 and alone_norm.shape == (extra, settings.n_steps, 5)
+    assert n_total > settings.n_records and len(rows) == n_total
     fixed, theta = study.vehicle()
     seed = settings.seed + n_total - 1                                 # the last one
     with one_thread():
         record = study.lateral_record(settings, fixed, theta, seed)
         alone = study.run_lateral_rbpf(settings, fixed, theta, record, seed, scheme)
-    np.testing.assert_array_equal(alone_norm[-1], alone)
-    everyone = getattr(part, f"{scheme}_scheme_norm")()
-    np.testing.assert_array_equal(everyone[:settings.n_records],
-                                  part.stack(f"rbpf_{scheme}_norm"))
-    hand = sum(bool(holds_from(np.abs(r - 1.0) <= 0.05, 350).all()) for r in everyone)
+    last = rows.iloc[-1]
+    assert last.seed == seed
+    assert bool(last.within_5pct_from_350) == bool(holds_from(np.abs(alone - 1.0) <= 0.05,
+                                                              350).all())
+    for j, name in enumerate(lateral_16state.PARAM_NAMES):
+        assert last[f"final_relative_error_{name}"] == alone[-1, j] - 1.0
+    stacked = part.stack(f"rbpf_{scheme}_norm")            # the first n_records, in full
+    hand = sum(bool(holds_from(np.abs(r - 1.0) <= 0.05, 350).all()) for r in stacked)
+    assert rows.within_5pct_from_350.iloc[:settings.n_records].sum() == hand
+    hand += int(rows.within_5pct_from_350.iloc[settings.n_records:].sum())
     assert m[f"lateral_within_5pct_from_350_rate_{scheme}_scheme_n"] == n_total
     assert m[f"lateral_within_5pct_from_350_rate_{scheme}_scheme"] == hand / n_total

@@ -128,7 +128,8 @@ def test_lateral_metrics_by_hand():
         r[:349] = 1.5                               # outside 5 % until step 349
         runs.append(r)
     runs[2][360, 4] = 0.9                           # record 2 leaves the band after step 350
-    m = study.lateral_metrics(runs, "_x")
+    rows = pd.DataFrame([study.scheme_row(seed, r) for seed, r in enumerate(runs)])
+    m = study.lateral_metrics(rows, "_x")
     assert m["lateral_within_5pct_from_350_rate_x"] == pytest.approx(1 / 3)   # record 0 only
     assert m["lateral_within_5pct_at_350_rate_x"] == pytest.approx(2 / 3)     # not record 1
     assert m["lateral_within_5pct_from_350_rate_x_n"] == 3

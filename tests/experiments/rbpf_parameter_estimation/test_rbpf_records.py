@@ -1,0 +1,82 @@
+"""Chapter 003's per-record studies: a record's row does not depend on its chunk, the run's
+metrics are the same whether its rows come from this process, Dask workers or the store, and
+each study's rows reduce to the chapter's metrics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from railpaper.experiments.rbpf_parameter_estimation import STUDIES
+from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
+from railpaper.experiments.rbpf_parameter_estimation import lateral, toy
+from railpaper.experiments.records import assert_chunk_invariant
+from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
+
+#: Small settings: 3 toy records of 60 steps, 2 lateral records of 400 steps (3 for the paper
+#: scheme), few particles, no exact posterior beyond one record.
+SMALL = dict(toy_seeds=3, toy_steps=60, toy_particles=30, toy_tempering_steps=10,
+             toy_ibis_particles=20, toy_ibis_records=1, n_steps=400, n_particles=20,
+             tempering_steps=50, n_records=2, paper_records=3, working_records=2,
+             ekf_guesses=1, ekf_steps=50, ibis_records=1, ibis_particles=20, mismatch_records=2)
+
+
+def small(**changes):
+    return chapter.SPEC.resolve(dict(SMALL, **changes), True)
+
+
+def test_the_chapter_exposes_its_three_studies():
+    assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme"]
+
+
+@pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME])
+def test_a_record_does_not_depend_on_its_chunk(study):
+    assert_chunk_invariant(study, small(), [4, 2])
+
+
+def test_the_toy_rows_are_the_long_records_side_by_side():
+    settings = small()
+    wide = toy.toy_rows(settings, (7,))
+    long = toy.long_records(wide)
+    assert long.init.tolist() == [1, 2] and long.seed.tolist() == [7, 7]
+    for ic in (1, 2):
+        assert long.iloc[ic - 1].rbpf_err_max == wide[f"rbpf_err_max_init{ic}"].iloc[0]
+    runs = toy.record_runs(settings, 7)                     # the same record, by hand
+    final = np.abs(runs[1].rbpf_paper[-1] - toy.truth(settings)).max()
+    assert long.iloc[1].rbpf_err_max == final
+
+
+def test_a_scheme_row_is_its_definition():
+    norm = np.ones((400, 5))
+    norm[:360, 0] = 1.2                      # Csy outside 5 % until step 360
+    norm[-1, 3] = 0.97
+    row = lateral.scheme_row(3, norm)
+    assert row["seed"] == 3 and row["within_5pct_from_350"] is False
+    assert row["within_5pct_at_350"] is False
+    assert row["final_relative_error_" + lateral.lateral_16state.PARAM_NAMES[3]] == pytest.approx(
+        -0.03)
+    norm[:360, 0] = 1.0
+    assert lateral.scheme_row(3, norm)["within_5pct_from_350"] is True
+
+
+def _same(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(
+        a[k] == b[k] or (isinstance(a[k], float) and math.isnan(a[k]) and math.isnan(b[k]))
+        for k in a)
+
+
+def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client):
+    settings = small()
+    here = chapter.run(settings)
+    store = EvidenceStore(tmp_path)
+    there = chapter.run(settings, record_map=stored_map(store, client=dask_client))
+    assert _same(here.metrics, there.metrics)
+    pd.testing.assert_frame_equal(here.toy.records, there.toy.records, check_exact=True)
+    assert sorted(store.read(toy.TOY, settings).seed) == [1, 2]          # after the illustrated
+    assert sorted(store.read(lateral.PAPER_SCHEME, settings).seed) == [2]
+    for name in ("records_toy", "records_lateral_paper_scheme"):
+        assert name in here.extra_tables
+    assert here.extra_tables["records_toy"].seed.tolist() == [0, 1, 2]
