@@ -112,6 +112,7 @@ class StudyPlan:
     first: int
     cpu_s_per_record: float | None = None
     skipped: str = ""
+    sizes: tuple[int, ...] = ()
 
 
 def plan(chapters: list[str]) -> list[StudyPlan]:
@@ -120,14 +121,15 @@ def plan(chapters: list[str]) -> list[StudyPlan]:
     plans = []
     for chapter in chapters:
         settings = chapter_spec(chapter).resolve({}, False)
-        sizes: dict[str, int] = {}
+        sizes: dict[str, set[int]] = {}
         for d in load_declarations(chapter, vocabulary):
             size = registry.get(d.key, {}).get("size")
             if d.study and size:
-                sizes[d.study] = max(size, sizes.get(d.study, 0))
+                sizes.setdefault(d.study, set()).add(int(size))
         studies = chapter_studies(chapter) if sizes else {}
-        plans += [StudyPlan(chapter, study, size, studies[study].first(settings))
-                  for study, size in sizes.items()]
+        plans += [StudyPlan(chapter, study, max(wanted), studies[study].first(settings),
+                            sizes=tuple(sorted(wanted)))
+                  for study, wanted in sizes.items()]
     return plans
 
 
@@ -150,24 +152,47 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
         computed = record_map.usage["records"] - before["records"]
         per_record = ((record_map.usage["cpu_s"] - before["cpu_s"]) / computed if computed
                       else _stored_cpu_per_record(root / item.chapter, item.study))
-        estimate = per_record * item.size
-        if spent + estimate > budget_s:
+        size, skipped = affordable_size(item.sizes or (item.size,), per_record,
+                                        budget_s - spent)
+        if skipped:
+            progress(f"railpaper: {item.chapter} {item.study}: {skipped}")
+        if size == 0:
             done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record,
-                                     "skipped": f"needs about {estimate / 3600:.2f} CPU-hours"}))
-            progress(f"railpaper: {item.chapter} {item.study}: left out, {done[-1].skipped}")
+                                     "skipped": skipped}))
             continue
+        item = StudyPlan(**{**item.__dict__, "size": size, "skipped": skipped})
+        seeds = seeds[:size]
+        spent += per_record * size         # the whole run's cost, stored records included
         before, started = dict(record_map.usage), time.perf_counter()
         record_map(study, settings, seeds,
                    lambda fraction, message: progress(f"railpaper: {item.chapter} {message}"))
         wall = time.perf_counter() - started
         cpu = record_map.usage["cpu_s"] - before["cpu_s"]
-        spent += cpu
         done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record}))
         _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
     for chapter in chapters:
         if (root / chapter / "provenance.json").exists():
             write_stored_verdicts(chapter, root)
     return done
+
+
+def affordable_size(sizes: tuple[int, ...], cpu_s_per_record: float, budget_s: float
+                    ) -> tuple[int, str]:
+    """The largest of a study's registered ``sizes`` whose CPU time fits in ``budget_s``, and
+    a line naming the sizes left out with the CPU-hours they need ('' when none is).
+
+    >>> affordable_size((30, 600, 5000), 1.0, 1000.0)
+    (600, 'sizes 5000 left out: they need about 1.39 CPU-hours')
+    >>> affordable_size((30,), 2.0, 10.0)
+    (0, 'sizes 30 left out: they need about 0.02 CPU-hours')
+    """
+    fits = [n for n in sorted(sizes) if cpu_s_per_record * n <= budget_s]
+    size = fits[-1] if fits else 0
+    left = [n for n in sorted(sizes) if n > size]
+    if not left:
+        return size, ""
+    return size, (f"sizes {', '.join(str(n) for n in left)} left out: they need about "
+                  f"{cpu_s_per_record * left[-1] / 3600:.2f} CPU-hours")
 
 
 def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
@@ -244,6 +269,7 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
     return problems
 
 
-__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "chapter_studies",
+__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "affordable_size",
+           "chapter_studies",
            "check_provenance", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -42,3 +42,13 @@ def test_provenance_must_match_the_defaults(tmp_path):
     problems = decisive.check_provenance(chapter, tmp_path)
     assert "not the chapter's defaults" in problems[0]
     assert "holds 0 of its 5 records" in problems[1]
+
+
+def test_affordable_size_takes_the_largest_registered_size_the_budget_pays_for():
+    from railpaper.pipeline.decisive import affordable_size
+
+    assert affordable_size((30, 600, 5000), 1.0, 5000.0) == (5000, "")      # exactly at it
+    size, why = affordable_size((30, 600, 5000), 1.0, 4999.0)
+    assert size == 600 and "5000" in why and "1.39 CPU-hours" in why       # 5000 s / 3600
+    size, why = affordable_size((30, 600, 5000), 2.0, 59.0)
+    assert size == 0 and why.startswith("sizes 30, 600, 5000 left out")
