@@ -42,6 +42,7 @@ from railpaper.experiments.rbpf_parameter_estimation import evidence, lateral, p
 from railpaper.experiments.rbpf_parameter_estimation.measurements import (
     read_measurements,
 )
+from railpaper.experiments.rbpf_parameter_estimation.mismatch import MODEL_ERROR
 from railpaper.experiments.rbpf_parameter_estimation.model_error import run_model_error
 from railpaper.experiments.rbpf_parameter_estimation.result import (
     RbpfParameterEstimationResult,
@@ -52,8 +53,9 @@ from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 
-#: The chapter's per-record studies: the toy's records, and each lateral RBPF scheme's.
-STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME)
+#: The chapter's per-record studies: the toy's records; each lateral RBPF scheme's, the
+#: augmented EKF's (one guess) and the truth plant with model error.
+STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
 
@@ -158,6 +160,9 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> RbpfParameterEs
                       "records_toy": toy.rows,
                       **({} if part is None or part.paper_scheme_rows.empty else
                          {"records_lateral_paper_scheme": part.paper_scheme_rows,
-                          "records_lateral_working_scheme": part.working_scheme_rows})},
+                          "records_lateral_working_scheme": part.working_scheme_rows,
+                          "records_lateral_ekf": part.ekf_rows}),
+                      **({} if mismatch is None else
+                         {"records_model_error": mismatch.study_rows()})},
         extra_files={"toy_posterior.json": posterior.toy_posterior_json(settings, toy.posterior)},
         toy=toy, lateral=part, mismatch=mismatch)

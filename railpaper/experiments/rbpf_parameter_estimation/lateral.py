@@ -203,6 +203,35 @@ WORKING_SCHEME = RecordStudy("rbpf-parameter-estimation", "lateral_working_schem
                              working_scheme_rows, chunk_records=1)
 
 
+def ekf_row(seed: int, norm: np.ndarray) -> dict:
+    """One record's row of the study :data:`EKF` from the first EKF guess's normalised estimates
+    ``norm`` (K, 5; NaN after a divergence): ``ekf_converged`` (every final estimate within 5 %,
+    :func:`ekf_converged`), ``ekf_diverged`` (the run stopped) and
+    ``final_relative_error_<param>`` (1; NaN after a divergence)."""
+    row = {"seed": int(seed), "ekf_converged": ekf_converged(norm),
+           "ekf_diverged": not bool(np.all(np.isfinite(norm[-1])))}
+    row.update({f"final_relative_error_{name}": float(norm[-1, j] - 1.0)
+                for j, name in enumerate(lateral_16state.PARAM_NAMES)})
+    return row
+
+
+def ekf_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`EKF`'s rows: one augmented-EKF guess (the first of
+    :func:`lateral_ekf`, generator ``[seed, 13]``) on each simulated record of ``seeds``."""
+    fixed, theta = vehicle()
+    rows = []
+    with one_thread():
+        for seed in seeds:
+            record = lateral_record(settings, fixed, theta, int(seed))
+            rows.append(ekf_row(int(seed), lateral_ekf(settings, fixed, theta, record,
+                                                       int(seed), 1)[0]))
+    return pd.DataFrame(rows)
+
+
+#: The augmented EKF, one guess per record, on records ``seed`` … (the chapter: ``n_records``).
+EKF = RecordStudy("rbpf-parameter-estimation", "lateral_ekf", ekf_rows, chunk_records=1)
+
+
 def lateral_metrics(rows: pd.DataFrame, suffix: str) -> dict:
     """Evidence metrics of one RBPF scheme from its study's rows (:func:`scheme_row`, one per
     record, in record order).
@@ -306,6 +335,8 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
             spent[scheme] += time.perf_counter() - t0
             first = pd.concat([first, more], ignore_index=True)
         scheme_tables[scheme] = first
+    ekf_table = (pd.DataFrame({"seed": pd.Series([], dtype="int64")}) if user else
+                 normalised(pd.DataFrame([ekf_row(r.seed, r.ekf_norm[0]) for r in runs])))
     for scheme in ("working", "paper"):
         timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / max(len(scheme_tables[scheme]),
                                                                    n_records)
@@ -324,7 +355,7 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
     t_s = np.arange(1, n_steps + 1) * settings.dt_s
     part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
                        critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count,
-                       paper_scheme_rows=scheme_tables["paper"],
+                       paper_scheme_rows=scheme_tables["paper"], ekf_rows=ekf_table,
                        working_scheme_rows=scheme_tables["working"])
     if not user:
         metrics.update(lateral_metrics(part.paper_scheme_rows, "_paper_scheme"))

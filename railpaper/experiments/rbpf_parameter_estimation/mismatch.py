@@ -45,6 +45,7 @@ from railpaper.experiments.lateral_vehicle import RecordSettings
 from railpaper.experiments.rbpf_parameter_estimation import lateral
 from railpaper.experiments.rbpf_parameter_estimation.result import LateralRecord
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
+from railpaper.experiments.records import RecordStudy, normalised
 from railpaper.models import lateral_16state
 from railpaper.models import lateral_truth
 from railpaper.paths import DATA_DIR
@@ -89,6 +90,8 @@ class MismatchResult:
         ``conicity_scale_m``, ``lowpass_cutoff_hz``, ``lowpass_order``.
     timings : dict
         Wall time per part, s.
+
+    :meth:`study_rows` gives the mismatch plant's records as the study :data:`MODEL_ERROR`'s rows.
     """
 
     metrics: dict
@@ -97,6 +100,13 @@ class MismatchResult:
     ekf_first: dict
     settings: dict
     timings: dict = field(default_factory=dict)
+
+    def study_rows(self) -> pd.DataFrame:
+        """The mismatch plant's records as the rows of the study :data:`MODEL_ERROR`
+        (:func:`study_row`: the same computation, seed by seed; CSV round trip exact)."""
+        mismatch = self.records[self.records.plant == "mismatch"]
+        return normalised(pd.DataFrame([study_row(row, {})
+                                        for row in mismatch.to_dict("records")]))
 
 
 def mismatch_settings(path: Path | None = None, components=COMPONENTS,
@@ -233,6 +243,36 @@ def plant_metrics(rows: pd.DataFrame, runs: list, ekf_first: list, suffix: str,
     return out
 
 
+def study_row(row: dict, diag: dict) -> dict:
+    """A record's row of the study :data:`MODEL_ERROR` from its ``records`` row and the plant's
+    diagnostics: the first EKF guess's outcome (``ekf_converged``, ``ekf_diverged``, its final
+    errors), the working-scheme RBPF's (``rbpf_all_within``: every parameter within 5 % from
+    step 350; its final errors), and the plant's size — not the counts over several EKF
+    guesses, which only the first record has."""
+    return {k: v for k, v in dict(row, **diag).items()
+            if k not in ("plant", "ekf_converged_count", "ekf_diverged_count")}
+
+
+def model_error_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`MODEL_ERROR`'s rows: the chapter's truth plant (every component, the
+    paper's measurement chain) on each record of ``seeds``, filtered by one EKF guess and the
+    working-scheme RBPF, as :func:`run_mismatch` filters it."""
+    st = mismatch_settings()
+    fixed, theta = lateral.vehicle()
+    rows = []
+    with one_thread():
+        for seed in seeds:
+            rec, diag = simulate_mismatch(settings, fixed, theta, int(seed), st)
+            row, _, _ = _filter_record(settings, fixed, theta, rec, int(seed), 1)
+            rows.append(study_row(row, diag))
+    return pd.DataFrame(rows)
+
+
+#: The truth plant with model error (the paper's "line data" reading), one row per record.
+MODEL_ERROR = RecordStudy("rbpf-parameter-estimation", "model_error", model_error_rows,
+                          chunk_records=1)
+
+
 def run_mismatch(settings: Settings, n_records: int | None = None, *, components=COMPONENTS,
                  chain: str = "paper", matched: bool = True, ekf_guesses_per_record: int = 1,
                  mismatch_path: Path | None = None, progress=None) -> MismatchResult:
@@ -324,5 +364,5 @@ def run_mismatch(settings: Settings, n_records: int | None = None, *, components
                           settings=st, timings=timings)
 
 
-__all__ = ["CHAINS", "COMPONENTS", "MismatchResult", "chain_output", "mismatch_settings",
+__all__ = ["CHAINS", "COMPONENTS", "MODEL_ERROR", "MismatchResult", "chain_output", "mismatch_settings",
            "plant_metrics", "run_mismatch", "simulate_mismatch", "track_input"]

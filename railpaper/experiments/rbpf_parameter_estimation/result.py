@@ -239,6 +239,10 @@ class LateralPart:
         ``lateral_paper_scheme``.  Empty for a user's file.
     working_scheme_rows : DataFrame
         The same for our working scheme (``working_records`` records).
+    ekf_rows : DataFrame
+        One row per record of ``runs`` for the augmented EKF's first guess: ``seed``,
+        ``ekf_converged``, ``ekf_diverged``, ``final_relative_error_<param>`` — the rows of the
+        study ``lateral_ekf``.  Empty for a user's file.
     """
 
     fixed: dict
@@ -250,6 +254,7 @@ class LateralPart:
     ekf_converged_count: int | None = None
     paper_scheme_rows: pd.DataFrame = field(default_factory=pd.DataFrame)
     working_scheme_rows: pd.DataFrame = field(default_factory=pd.DataFrame)
+    ekf_rows: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     def final_relative_errors(self, scheme: str) -> np.ndarray:
         """θ̂/θ − 1 at the last step of every record the ``scheme`` ('paper' or 'working') RBPF

@@ -12,7 +12,7 @@ import pytest
 
 from railpaper.experiments.rbpf_parameter_estimation import STUDIES
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.rbpf_parameter_estimation import lateral, toy
+from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, toy
 from railpaper.experiments.records import assert_chunk_invariant
 from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
 
@@ -28,11 +28,13 @@ def small(**changes):
     return chapter.SPEC.resolve(dict(SMALL, **changes), True)
 
 
-def test_the_chapter_exposes_its_three_studies():
-    assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme"]
+def test_the_chapter_exposes_its_studies():
+    assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme",
+                                         "lateral_ekf", "model_error"]
 
 
-@pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME])
+@pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME, lateral.EKF,
+                                   mismatch.MODEL_ERROR])
 def test_a_record_does_not_depend_on_its_chunk(study):
     assert_chunk_invariant(study, small(), [4, 2])
 
@@ -77,6 +79,18 @@ def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client)
     pd.testing.assert_frame_equal(here.toy.records, there.toy.records, check_exact=True)
     assert sorted(store.read(toy.TOY, settings).seed) == [1, 2]          # after the illustrated
     assert sorted(store.read(lateral.PAPER_SCHEME, settings).seed) == [2]
-    for name in ("records_toy", "records_lateral_paper_scheme"):
+    for name in ("records_toy", "records_lateral_paper_scheme", "records_lateral_ekf",
+                 "records_model_error"):
         assert name in here.extra_tables
     assert here.extra_tables["records_toy"].seed.tolist() == [0, 1, 2]
+
+
+@pytest.mark.parametrize("study, table", [(lateral.EKF, "records_lateral_ekf"),
+                                          (mismatch.MODEL_ERROR, "records_model_error")])
+def test_the_rows_kept_by_the_run_are_the_study_s_rows(study, table):
+    """The first records of the EKF and model-error studies are computed inside the chapter run
+    (with more EKF guesses on the first record); their rows equal the study's own."""
+    settings = small()
+    kept = chapter.run(settings).extra_tables[table]
+    pd.testing.assert_frame_equal(kept, study.rows(settings, tuple(kept.seed)).pipe(
+        lambda frame: frame[kept.columns]).astype(kept.dtypes.to_dict()), check_exact=True)
