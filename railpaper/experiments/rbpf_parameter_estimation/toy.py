@@ -146,11 +146,17 @@ def record_runs(settings: Settings, seed: int) -> list[ToyRun]:
 
 def wide_row(seed: int, stats: list[dict]) -> dict:
     """One seed's row from its per-initial-condition stats (``init`` dropped, the rest
-    suffixed ``_init<ic>``)."""
+    suffixed ``_init<ic>``), then ``rbpf_converged_both_inits``, ``ekf_converged_both_inits``
+    and ``ekf_outcome_differs_between_inits`` (yes/no over both initial conditions)."""
     row = {"seed": seed}
     for one in stats:
         ic = one["init"]
         row.update({f"{k}_init{ic}": v for k, v in one.items() if k not in ("seed", "init")})
+    # the record's outcome over both initial conditions (what 'immune to the initial value'
+    # and 'sensitive to the initial value' read): yes/no
+    row["rbpf_converged_both_inits"] = all(one["rbpf_converged"] for one in stats)
+    row["ekf_converged_both_inits"] = all(one["ekf_converged"] for one in stats)
+    row["ekf_outcome_differs_between_inits"] = len({one["ekf_converged"] for one in stats}) > 1
     return row
 
 
