@@ -38,6 +38,20 @@ def rates(seconds_per_step) -> list[float]:
     return [1.0 / s for s in seconds_per_step]
 
 
+def steps_per_second(run_once: Callable[[], object], n_steps: int, repeats: int = 5,
+                     clock: Callable[[], float] = time.perf_counter) -> float:
+    """The rate (Hz) at which ``run_once`` — a filter or observer over ``n_steps`` steps —
+    processes steps: ``n_steps`` over the median wall time of ``repeats`` calls (the median
+    ignores a call the operating system interrupted).  What an on-line estimator sustains on
+    this machine, to set against the sample rate its problem needs."""
+    seconds = []
+    for _ in range(max(1, int(repeats))):
+        start = clock()
+        run_once()
+        seconds.append(clock() - start)
+    return float(n_steps / np.median(seconds))
+
+
 def summary(values) -> dict:
     """Median, min and max of the values (the spread over the alternations)."""
     v = np.asarray(values, float)

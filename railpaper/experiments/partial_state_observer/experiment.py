@@ -56,6 +56,7 @@ from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.models import vertical_10dof as v10
 from railpaper.settling import settling_time_s
 from railpaper.threads import one_thread
+from railpaper.timing import steps_per_second
 
 MEASUREMENT = records.MEASUREMENT
 existence_table, rank_claims, ranks = evidence.existence_table, evidence.rank_claims, evidence.ranks
@@ -189,6 +190,11 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> PartialStateObs
         truths[speed] = record(tr, 0, j)
         default[speed] = estimates(ctx, settings, speed, truths[speed])
         clean[speed] = estimates(ctx, settings, speed, truths[speed], noisy=False)
+    first = truths[speeds[0]]                            # the paper's observer, one record
+    timings["observer_steps_per_second"] = steps_per_second(
+        lambda: ctx.paper_zoh.run(first["y"], first["q_m"],
+                                  first["z_m"][0] + settings.initial_error_m),
+        len(first["t_s"]))
     progress(0.95, "alpha sweep")
     sweep = alpha_sweep(ctx, settings, truths)
     mc = evidence.runs_table(rows, kalman_rows, settings)

@@ -45,6 +45,7 @@ from railpaper.experiments.reduced_order_observer.result import (
 )
 from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTIONS, Settings
 from railpaper.models import single_wheelset as sw
+from railpaper.timing import steps_per_second
 
 
 #: The chapter's per-record studies (the evidence store and the decisive run compute them).
@@ -188,6 +189,10 @@ def run(settings: Settings, *, progress=None,
         columns[f"wheel_rail_force_est_N_{lab}"] = main.force_est_N
     mc, estimators, records = pd.DataFrame(), None, {}
     timings = {"single_runs_s": time.perf_counter() - started}
+    first = runs[settings.speeds_kmh[0]].record          # the paper's observer, one record
+    timings["observer_steps_per_second"] = steps_per_second(
+        lambda: observers["paper"].run(first.y_measured, first.q_measured_m[:, None],
+                                       first.x2_initial), len(first.t_s))
     if settings.side_tables:
         mc_started = time.perf_counter()
         records.update(evidence.monte_carlo_records(
