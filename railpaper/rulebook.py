@@ -319,7 +319,8 @@ def cost_ratio(ratio: float, low: float, high: float, direction: str, margin: fl
     """
     if direction not in DIRECTIONS:
         raise ValueError(f"direction must be one of {DIRECTIONS}, got {direction!r}")
-    text = f"{ratio:.3g} [{low:.3g}, {high:.3g}] on this machine"
+    text = (f"{ratio:.3g} (an exact count)" if low == high == ratio else
+            f"{ratio:.3g} [{low:.3g}, {high:.3g}] on this machine")
     if share:
         bar, beyond, short = 0.5, low > 0.5, high <= 0.5
         text += "; claimed: more than one half"

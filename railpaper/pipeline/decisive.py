@@ -168,8 +168,10 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
                    lambda fraction, message: progress(f"railpaper: {item.chapter} {message}"))
         wall = time.perf_counter() - started
         cpu = record_map.usage["cpu_s"] - before["cpu_s"]
+        computed = record_map.usage["records"] - before["records"]
         done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record}))
-        _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
+        if computed:                     # a study only reused keeps the cost it was computed at
+            _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
     for chapter in chapters:
         if (root / chapter / "provenance.json").exists():
             write_stored_verdicts(chapter, root)
@@ -237,13 +239,19 @@ def _stored_cpu_per_record(folder: Path, study: str) -> float:
 
 def _write_provenance(folder: Path, item: StudyPlan, settings, commit: str, workers: int,
                       wall_s: float, cpu_s: float) -> None:
+    """Record a study's computation in ``folder/provenance.json``: a study extended from fewer
+    stored records adds this run's wall and CPU time to what those records cost."""
     path = folder / "provenance.json"
     record = json.loads(path.read_text()) if path.exists() else {"studies": {}}
     record.update(commit=commit, date=datetime.date.today().isoformat(),
                   settings=settings.as_dict(), machine=machine())
+    before = record["studies"].get(item.study, {})
+    if before.get("records", 0) >= item.size:    # recomputed from scratch: its own cost only
+        before = {}
     record["studies"][item.study] = {"seeds": [item.first, item.first + item.size],
                                      "records": item.size, "workers": workers,
-                                     "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1)}
+                                     "wall_s": round(before.get("wall_s", 0.0) + wall_s, 1),
+                                     "cpu_s": round(before.get("cpu_s", 0.0) + cpu_s, 1)}
     folder.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
 

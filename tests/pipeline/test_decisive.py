@@ -52,3 +52,20 @@ def test_affordable_size_takes_the_largest_registered_size_the_budget_pays_for()
     assert size == 600 and "5000" in why and "1.39 CPU-hours" in why       # 5000 s / 3600
     size, why = affordable_size((30, 600, 5000), 2.0, 59.0)
     assert size == 0 and why.startswith("sizes 30, 600, 5000 left out")
+
+
+def test_an_extended_study_adds_its_cost_and_a_recomputed_one_replaces_it(tmp_path):
+    import json
+
+    from railpaper.experiments.partial_state_observer import SPEC
+    from railpaper.pipeline.decisive import StudyPlan, _write_provenance
+
+    settings = SPEC.resolve({}, False)
+    _write_provenance(tmp_path, StudyPlan("c", "s", 100, 0), settings, "a", 2, 10.0, 20.0)
+    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "b", 2, 5.0, 8.0)
+    study = json.loads((tmp_path / "provenance.json").read_text())["studies"]["s"]
+    assert (study["records"], study["wall_s"], study["cpu_s"]) == (150, 15.0, 28.0)
+    assert study["seeds"] == [0, 150]
+    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "c", 2, 1.0, 2.0)
+    study = json.loads((tmp_path / "provenance.json").read_text())["studies"]["s"]
+    assert (study["wall_s"], study["cpu_s"]) == (1.0, 2.0)
