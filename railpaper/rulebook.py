@@ -15,6 +15,7 @@ threshold of a claim's own.
 * :func:`paired_change` — a trend or comparison: the paired relative change of the means with
   its interval against the book-wide margin, in the claimed direction;
 * :func:`equivalence` — similarity or absence: two one-sided tests against ±margin;
+  :func:`departure` — a claimed offset ('biased'), its mirror;
 * :func:`deterministic`, :func:`design`, :func:`implementation` — exact values, stated checks
   and rates; :func:`cost_ratio` — a time ratio or share measured on this machine.
 
@@ -44,8 +45,8 @@ from railpaper.paths import DATA_DIR
 
 VOCABULARY_FILE = DATA_DIR / "vocabulary.toml"
 VERDICTS = ("reproduced", "differs", "undecided", "not testable")
-PROCEDURES = ("single-run", "population-rate", "paired-change", "equivalence", "deterministic",
-              "design", "implementation")
+PROCEDURES = ("single-run", "population-rate", "paired-change", "equivalence", "departure",
+              "deterministic", "design", "implementation")
 DIRECTIONS = ("increase", "decrease")
 
 
@@ -273,6 +274,28 @@ def equivalence(deviations: Sequence[float] | None = None, margin: float = 0.1,
     return Decision("undecided", f"{text}: not within it", statistic, t_low, t_high, n)
 
 
+def departure(deviations: Sequence[float] | None = None, margin: float = 0.1,
+              level: float = 0.95, *, baseline: Sequence[float] | None = None,
+              other: Sequence[float] | None = None) -> Decision:
+    """A claimed offset ('biased'): the mirror of :func:`equivalence` on the same intervals.
+    *reproduced* when the ``level`` interval lies wholly beyond ±m (an offset a reader would
+    see), *differs* when the (2 level − 1) interval lies within ±m (no visible offset), else
+    *undecided*.
+
+    >>> departure([0.30, 0.32, 0.31, 0.29], margin=0.1).verdict
+    'reproduced'
+    >>> departure([0.01, -0.01, 0.0, 0.005], margin=0.1).verdict
+    'differs'
+    """
+    mirror = equivalence(deviations, margin, level, baseline=baseline, other=other)
+    verdict = {"reproduced": "differs", "differs": "reproduced"}.get(mirror.verdict,
+                                                                    "undecided")
+    reason = mirror.reason.replace(": within it", ": within it, no visible offset").replace(
+        ": not within it", ": neither wholly beyond nor within it")
+    return Decision(verdict, f"claimed offset beyond ±{margin:g}; {reason}", mirror.statistic,
+                    mirror.low, mirror.high, mirror.n)
+
+
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:
     """An exact quantity: *reproduced* when ``|value − paper_value| ≤ resolution / 2`` (the
     paper's printed precision), else *differs*."""
@@ -365,6 +388,6 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
 
 
 __all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
-           "clopper_pearson", "continuous_size", "cost_ratio", "deterministic", "design", "equivalence",
+           "clopper_pearson", "continuous_size", "cost_ratio", "departure", "deterministic", "design", "equivalence",
            "implementation", "mid_rank_tail", "most_favourable", "paired_change",
            "population_rate", "rate_size", "relative_change", "relative_change_sd", "single_run", "single_run_size"]

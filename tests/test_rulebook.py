@@ -194,3 +194,17 @@ def test_vocabulary_is_one_map_for_the_book():
     assert vocabulary.entry("trend")["margin"] == vocabulary.entry("similarity")["margin"]
     with pytest.raises(KeyError, match="no word class 'often'"):
         vocabulary.entry("often")
+
+
+@pytest.mark.parametrize("deviations, verdict", [
+    ([0.30, 0.32, 0.31, 0.29], "reproduced"),       # wholly beyond +0.1
+    ([-0.30, -0.32, -0.31, -0.29], "reproduced"),   # wholly beyond -0.1
+    ([0.01, -0.01, 0.0, 0.005], "differs"),         # the 90 % interval within ±0.1
+    ([0.0, 0.2, -0.1, 0.3], "undecided"),
+])
+def test_departure_is_the_mirror_of_equivalence(deviations, verdict):
+    from railpaper.rulebook import departure
+    mirror = {"reproduced": "differs", "differs": "reproduced", "undecided": "undecided"}
+    decision = departure(deviations, margin=0.1)
+    assert decision.verdict == verdict == mirror[equivalence(deviations, margin=0.1).verdict]
+    assert decision.statistic == pytest.approx(np.mean(deviations))

@@ -93,7 +93,7 @@ def register_chapter(chapter: str, date: str | None = None, quick: bool = False,
             if absent:                     # a declared column the study does not compute
                 raise PipelineError(f"{d.key}: study {d.study!r} has no column {absent[0]!r} at "
                                     "the chapter's defaults")
-            if d.procedure in ("paired-change", "equivalence"):
+            if d.procedure in ("paired-change", "equivalence", "departure"):
                 sigma = pilot_sigma(d, pilots[d.study])
         sizes[d.key] = registered_size(d, vocabulary, sigma)
     registry, revised = register(rows, vocabulary, load_registry(), sizes,

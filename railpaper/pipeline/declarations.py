@@ -58,7 +58,8 @@ from railpaper.rulebook import (
 KINDS = ("single-run", "population", "deterministic", "design", "implementation")
 #: The procedures each kind may use (a population claim is a rate, a change or an equivalence).
 KIND_PROCEDURES = {"single-run": ("single-run",),
-                   "population": ("population-rate", "paired-change", "equivalence"),
+                   "population": ("population-rate", "paired-change", "equivalence",
+                                  "departure"),
                    "deterministic": ("deterministic",), "design": ("design",),
                    "implementation": ("implementation",)}
 REQUIRED_KEYS = ("id", "claim", "words", "source", "kind", "word_class", "metrics", "central")
@@ -155,7 +156,7 @@ def _check_shape(d: Declaration, where: str) -> None:
                             f"direction {' or '.join(DIRECTIONS)}")
     if d.procedure == "population-rate" and len(d.metrics) != 1:
         raise DataError(f"{where}: a rate reads one per-record yes/no column")
-    if d.procedure == "equivalence" and d.study and len(d.metrics) not in (1, 2):
+    if d.procedure in ("equivalence", "departure") and d.study and len(d.metrics) not in (1, 2):
         raise DataError(f"{where}: an equivalence reads deviations, or [baseline, other]")
     if d.procedure in ("single-run", "deterministic"):
         if not d.paper_value or len(d.paper_value) != len(d.metrics):
@@ -203,7 +204,8 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
     if declaration.procedure == "single-run":
         return max(floor, single_run_size(policy["alpha_single_run"],
                                           policy["single_run_resolution"], level, power))
-    if declaration.procedure in ("paired-change", "equivalence") and declaration.study:
+    if declaration.procedure in ("paired-change", "equivalence", "departure") \
+            and declaration.study:
         return None if pilot_sigma is None else max(floor, continuous_size(
             pilot_sigma, entry["margin"], level, power))
     return None
@@ -310,7 +312,8 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
         return Decision("reproduced" if inside else "differs",
                         f"exact deviation {float(value):+.3g} {'within' if inside else 'beyond'} "
                         f"±{entry['margin']:g}", float(value))
-    if d.procedure in ("single-run", "population-rate", "paired-change", "equivalence"):
+    if d.procedure in ("single-run", "population-rate", "paired-change", "equivalence",
+                       "departure"):
         if rows is None or len(rows) == 0:
             return Decision("undecided", f"no records of study {d.study!r}")
         missing = [m for m in d.metrics if m not in rows.columns]
@@ -321,7 +324,7 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
             return Decision("undecided", f"{len(rows)} records of the {size} registered for it "
                             "(sizes by power, before the deciding run)", n=len(rows))
     left_out = ""
-    if d.procedure in ("paired-change", "equivalence"):
+    if d.procedure in ("paired-change", "equivalence", "departure"):
         never = (rows[list(d.metrics)].to_numpy(float) == policy["never_code"]).any(axis=1)
         if never.mean() > policy["never_share_max"]:
             return Decision("undecided", f"on {int(never.sum())} of {len(rows)} records it never "
@@ -374,12 +377,13 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
         return rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
                                       rows[d.metrics[1]].to_numpy(float), d.direction,
                                       entry["margin"], level)
-    if d.procedure == "equivalence":
+    if d.procedure in ("equivalence", "departure"):
+        procedure = rulebook.equivalence if d.procedure == "equivalence" else rulebook.departure
         if len(d.metrics) == 1:
-            return rulebook.equivalence(rows[d.metrics[0]].to_numpy(float), entry["margin"], level)
-        return rulebook.equivalence(margin=entry["margin"], level=level,
-                                    baseline=rows[d.metrics[0]].to_numpy(float),
-                                    other=rows[d.metrics[1]].to_numpy(float))
+            return procedure(rows[d.metrics[0]].to_numpy(float), entry["margin"], level)
+        return procedure(margin=entry["margin"], level=level,
+                         baseline=rows[d.metrics[0]].to_numpy(float),
+                         other=rows[d.metrics[1]].to_numpy(float))
     return None
 
 
