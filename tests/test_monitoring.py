@@ -38,8 +38,9 @@ def test_mean_time_between_false_alarms_and_its_poisson_bound_by_hand():
 
 @pytest.mark.parametrize("shift, published", [(0.0, 336.0), (1.0, 8.38)])
 def test_brook_evans_average_run_length_matches_the_published_table(shift, published):
-    """Standardised one-sided CUSUM, k = 0.5, h = 4 (Lucas & Crosier 1982, Table 1; Montgomery,
-    Introduction to Statistical Quality Control, Table 9.3 for the two-sided scheme, 168 = 336/2)."""
+    """Standardised one-sided CUSUM, k = 0.5, h = 4: the values tabulated in the CUSUM literature
+    (e.g. Hawkins & Olwell 1998; a two-sided scheme's 168 is half of 336); the brute-force test
+    below checks the same function independently of any table."""
     arl = cusum_average_run_length(shift - 0.5, 4.0)
     assert arl == pytest.approx(published, rel=0.005)
 
