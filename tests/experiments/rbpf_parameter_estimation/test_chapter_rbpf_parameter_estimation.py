@@ -57,6 +57,13 @@ def test_quick_run_has_every_key(quick_result):
     for key, row in claims.items():                 # run() alone gives every metric a rule reads
         for name in ([] if is_untestable(row) else rule_metrics(row)):
             assert name in metrics, (key, name)
+    from railpaper.pipeline.declarations import load_declarations
+    for d in load_declarations("rbpf-parameter-estimation"):   # every declared column exists
+        if d.study:
+            table = result.extra_tables[f"records_{d.study}"]
+            assert all(name in table.columns for name in d.metrics), (d.id, d.metrics)
+        else:
+            assert all(name in metrics or name in result.timings for name in d.metrics), d.id
     assert isinstance(metrics["toy_ekf_diverged_init1"], bool)
     assert metrics["lateral_within_5pct_from_350_rate_paper_scheme_n"] == settings.paper_records
     ts = result.timeseries
