@@ -13,9 +13,10 @@ carries a Kalman filter for the linear state (same ``system(theta)`` interface a
     ``q_k(i)`` (Eqs. 10–11).
 (4) KF measurement update of particle i's state with the matrices of the new θ_k(i)
     (Eqs. 12–15).  As printed, the new θ_k(i) inherits the prior state of old particle i.
-    The compiled engine predicts once: step (1) is :func:`~railpaper.engine.kalman_bank.
-    kalman_predict` (prior and likelihood, no covariance update) and step (4)
-    :func:`~railpaper.engine.kalman_bank.kalman_update` of that stored prior with the new θ's
+    The compiled engine predicts once: step (1) is
+    :func:`~railpaper.engine.kalman_bank.kalman_predict` (prior and likelihood, no covariance
+    update) and step (4) :func:`~railpaper.engine.kalman_bank.kalman_update` of that stored prior
+    with the new θ's
     H and R (the lateral model's H holds rows of A(θ)).  The numpy engine (the reference)
     runs a full predict + update in step (1) and, when H or R depend on θ, predicts again
     for step (4); when they do not (both toys) it reuses the update of step (1).

@@ -49,7 +49,8 @@ class Record:
 
     @classmethod
     def from_run(cls, run: dict) -> "Record":
-        """The record of one run as :func:`partial_state_observer.record` returns it."""
+        """The record of one run as
+        :func:`~railpaper.experiments.partial_state_observer.records.record` returns it."""
         return cls(**{k: run[k] for k in cls.__dataclass_fields__})
 
 
@@ -85,7 +86,8 @@ class Estimates:
 
 @dataclass
 class PartialStateObserverResult(ChapterResult):
-    """What :func:`partial_state_observer.run` returns: :class:`ChapterResult` plus named results.
+    """What :func:`~railpaper.experiments.partial_state_observer.experiment.run` returns:
+    :class:`ChapterResult` plus named results.
 
     Attributes
     ----------

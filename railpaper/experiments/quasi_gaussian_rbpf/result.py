@@ -76,7 +76,8 @@ class ComputingTime:
 
 @dataclass
 class QuasiGaussianRBPFResult(ChapterResult):
-    """What :func:`quasi_gaussian_rbpf.run` returns: :class:`ChapterResult` plus named results.
+    """What :func:`~railpaper.experiments.quasi_gaussian_rbpf.experiment.run` returns:
+    :class:`ChapterResult` plus named results.
 
     Attributes
     ----------
