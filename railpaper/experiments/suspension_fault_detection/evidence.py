@@ -25,6 +25,7 @@ import pandas as pd
 from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
+from railpaper.monitoring import detected_within, kaplan_meier_median
 from railpaper.stats import median_interval, quantile_ranks, rate
 
 #: Points of each ROC curve (thresholds), at most.
@@ -85,7 +86,8 @@ def detector_outcomes(runs: list[RecordRun], detector: str, h: float, first_row:
                      "pre_max": window_max(s[:fault_row], first_row),
                      "post_max_1s": float(s[fault_row:one_s].max()) if s[fault_row:one_s].size
                      else -np.inf,
-                     "end_s": r.end_s, "flange_contact": r.flange_contact})
+                     "end_s": r.end_s, "flange_contact": r.flange_contact,
+                     "watched_s": max(0.0, r.end_s - r.fault_time_s)})
     return pd.DataFrame(rows)
 
 
@@ -117,6 +119,33 @@ def fault_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
     med, low, high = censored_median(delay)
     m.update({f"delay_median_s_{tag}": med, f"delay_median_s_{tag}_low": low,
               f"delay_median_s_{tag}_high": high, f"delay_median_s_{tag}_n": len(delay)})
+    m.update(survival_delay_metrics(outcomes, tag))
+    return m
+
+
+def survival_delay_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
+    """The delays as survival data (:mod:`railpaper.monitoring`): a record watched after the
+    fault until its end or flange contact and never alarmed is censored there; one that alarmed
+    before the fault is censored at 0 (that alarm is a false alarm, not a detection).
+    ``km_delay_median_s_<tag>`` with ``_low``/``_high`` (Brookmeyer–Crowley) and the separate
+    fields ``km_delay_median_reached_<tag>`` / ``km_delay_high_bounded_<tag>`` (False: not
+    detected on enough records for the median, or its upper end; the number is then absent,
+    never coded), and ``km_detected_within_<d>s_<tag>``."""
+    detected = np.isfinite(outcomes["delay_s"].to_numpy(float))
+    times = np.where(detected, outcomes["delay_s"].to_numpy(float),
+                     np.where(outcomes["early"].to_numpy(bool), 0.0,
+                              outcomes["watched_s"].to_numpy(float)))
+    if times.size == 0:
+        return {}
+    median = kaplan_meier_median(times, detected)
+    m = {f"km_delay_median_reached_{tag}": median.median is not None,
+         f"km_delay_high_bounded_{tag}": median.high is not None,
+         f"km_delay_n_{tag}": median.n, f"km_delay_detected_{tag}": median.detected}
+    for key, value in (("", median.median), ("_low", median.low), ("_high", median.high)):
+        if value is not None:
+            m[f"km_delay_median_s_{tag}{key}"] = value
+    for d in WITHIN_S:
+        m[f"km_detected_within_{d:g}s_{tag}"] = detected_within(times, detected, d + 1e-9)
     return m
 
 
