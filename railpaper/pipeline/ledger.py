@@ -293,6 +293,25 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
 
 
+def _with_cost(decision: Decision, chapter: str, study: str, size: int | None,
+               table: pd.DataFrame | None) -> Decision:
+    """An undecided row short of its registered size, beside stored decisive evidence: its
+    reason also gives the CPU time the size needs at the rate the stored records cost (the
+    decisive run leaves out sizes past its 2-CPU-hour budget)."""
+    if (decision.verdict != "undecided" or not study or not size
+            or (table is not None and len(table) >= size)):
+        return decision
+    path = DECISIVE_EVIDENCE_DIR / chapter / "provenance.json"
+    entry = (json.loads(path.read_text()).get("studies", {}).get(study)
+             if path.exists() else None)
+    if not entry or not entry.get("records"):
+        return decision
+    hours = entry["cpu_s"] / entry["records"] * size / 3600
+    return dataclasses.replace(decision, reason=(
+        f"{decision.reason}; {size} records need about {hours:.2g} CPU-hours at the stored "
+        f"records' rate (the stored evidence holds {entry['records']})"))
+
+
 @functools.lru_cache(maxsize=32)
 def _read_csv(path: str, mtime_ns: int) -> pd.DataFrame:  # noqa: ARG001 - part of the cache key
     """A run's per-record rows, read once per file version (a page asks for them per row)."""
@@ -326,6 +345,7 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
             table, evidence = (study_rows(chapter, d.study, out, run, size) if d.study
                                else (None, "this run"))
             decision, verdict = decide(d, vocabulary, table, values, size), ""
+            decision = _with_cost(decision, chapter, d.study, size, table)
         verdict = verdict or decision.verdict
         paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
                  else d.direction or "(no number)")
