@@ -136,24 +136,32 @@ def plan(chapters: list[str]) -> list[StudyPlan]:
 def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=print,
                  budget_s: float = CPU_BUDGET_S, root: Path = DECISIVE_DIR) -> list[StudyPlan]:
     """Compute every planned study into ``root`` (rows already there are reused after their
-    spot check), writing ``<root>/<chapter>/provenance.json``; a study whose estimated CPU time
-    (its first chunk's per record × its size) would take the run past ``budget_s`` is left out
-    and reported."""
+    spot check), writing ``<root>/<chapter>/provenance.json``.  Each study's CPU seconds per
+    record come from its provenance, else from timing one chunk here; the sizes the
+    ``budget_s`` pays for are chosen across all studies at once, cheapest first
+    (:func:`allocate_sizes`), and the sizes left out are reported with their cost."""
     store, commit = EvidenceStore(root), current_commit()
     record_map = stored_map(store, client=client, commit=commit)
-    done, spent = [], 0.0
-    for item in plan(chapters):
-        settings = chapter_spec(item.chapter).resolve({}, False)
-        study = chapter_studies(item.chapter)[item.study]
-        seeds = list(range(item.first, item.first + item.size))
-        probe = seeds[:study.chunk_records]
-        before = dict(record_map.usage)
-        record_map(study, settings, probe)                   # in the store; reused below
-        computed = record_map.usage["records"] - before["records"]
-        per_record = ((record_map.usage["cpu_s"] - before["cpu_s"]) / computed if computed
-                      else _stored_cpu_per_record(root / item.chapter, item.study))
-        size, skipped = affordable_size(item.sizes or (item.size,), per_record,
-                                        budget_s - spent)
+    items = plan(chapters)
+    rates = {}
+    for item in items:
+        rate_s = _stored_cpu_per_record(root / item.chapter, item.study)
+        if not rate_s:                           # time one chunk here (its rows are not kept)
+            study = chapter_studies(item.chapter)[item.study]
+            settings = chapter_spec(item.chapter).resolve({}, False)
+            probe = list(range(item.first, item.first + study.chunk_records))
+            started = time.process_time()
+            map_in_process(study, settings, probe)
+            rate_s = (time.process_time() - started) / len(probe)
+        rates[(item.chapter, item.study)] = rate_s
+    chosen = allocate_sizes({key: (rates[key], item.sizes or (item.size,))
+                             for key, item in zip([(i.chapter, i.study) for i in items], items)},
+                            budget_s)
+    done = []
+    for item in items:
+        key = (item.chapter, item.study)
+        size, skipped = chosen[key]
+        per_record = rates[key]
         if skipped:
             progress(f"railpaper: {item.chapter} {item.study}: {skipped}")
         if size == 0:
@@ -161,10 +169,10 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
                                      "skipped": skipped}))
             continue
         item = StudyPlan(**{**item.__dict__, "size": size, "skipped": skipped})
-        seeds = seeds[:size]
-        spent += per_record * size         # the whole run's cost, stored records included
+        settings = chapter_spec(item.chapter).resolve({}, False)
+        study = chapter_studies(item.chapter)[item.study]
         before, started = dict(record_map.usage), time.perf_counter()
-        record_map(study, settings, seeds,
+        record_map(study, settings, list(range(item.first, item.first + size)),
                    lambda fraction, message: progress(f"railpaper: {item.chapter} {message}"))
         wall = time.perf_counter() - started
         cpu = record_map.usage["cpu_s"] - before["cpu_s"]
@@ -178,23 +186,31 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
     return done
 
 
-def affordable_size(sizes: tuple[int, ...], cpu_s_per_record: float, budget_s: float
-                    ) -> tuple[int, str]:
-    """The largest of a study's registered ``sizes`` whose CPU time fits in ``budget_s``, and
-    a line naming the sizes left out with the CPU-hours they need ('' when none is).
+def allocate_sizes(studies: dict, budget_s: float) -> dict:
+    """For ``studies`` {key: (CPU seconds per record, registered sizes)}, the size of each that
+    the whole run computes, and a line naming the sizes left out with their CPU-hours: every
+    (study, size) taken in order of its total cost, cheapest first, while the sum over the
+    studies of rate × chosen size stays within ``budget_s`` (so a study's largest size cannot
+    starve the others' smaller ones; the rule is fixed before any record is seen).
 
-    >>> affordable_size((30, 600, 5000), 1.0, 1000.0)
-    (600, 'sizes 5000 left out: they need about 1.39 CPU-hours')
-    >>> affordable_size((30,), 2.0, 10.0)
-    (0, 'sizes 30 left out: they need about 0.02 CPU-hours')
+    >>> allocate_sizes({"a": (1.0, (30, 5000)), "b": (2.0, (30, 600))}, 1500.0)
+    {'a': (30, 'sizes 5000 left out: they need about 1.39 CPU-hours'), 'b': (600, '')}
     """
-    fits = [n for n in sorted(sizes) if cpu_s_per_record * n <= budget_s]
-    size = fits[-1] if fits else 0
-    left = [n for n in sorted(sizes) if n > size]
-    if not left:
-        return size, ""
-    return size, (f"sizes {', '.join(str(n) for n in left)} left out: they need about "
-                  f"{cpu_s_per_record * left[-1] / 3600:.2f} CPU-hours")
+    chosen = {key: 0 for key in studies}
+    candidates = sorted((rate_s * n, key, n) for key, (rate_s, sizes) in studies.items()
+                        for n in sizes)
+    for _, key, n in candidates:
+        rate_s = studies[key][0]
+        spent = sum(studies[k][0] * m for k, m in chosen.items())
+        if n > chosen[key] and spent + rate_s * (n - chosen[key]) <= budget_s:
+            chosen[key] = n
+    out = {}
+    for key, (rate_s, sizes) in studies.items():
+        left = sorted(n for n in sizes if n > chosen[key])
+        out[key] = (chosen[key], "" if not left else (
+            f"sizes {', '.join(str(n) for n in left)} left out: they need about "
+            f"{rate_s * left[-1] / 3600:.2f} CPU-hours"))
+    return out
 
 
 def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
@@ -277,7 +293,7 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
     return problems
 
 
-__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "affordable_size",
+__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "allocate_sizes",
            "chapter_studies",
            "check_provenance", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -44,14 +44,15 @@ def test_provenance_must_match_the_defaults(tmp_path):
     assert "holds 0 of its 5 records" in problems[1]
 
 
-def test_affordable_size_takes_the_largest_registered_size_the_budget_pays_for():
-    from railpaper.pipeline.decisive import affordable_size
+def test_sizes_are_allocated_cheapest_first_across_studies_within_the_budget():
+    from railpaper.pipeline.decisive import allocate_sizes
 
-    assert affordable_size((30, 600, 5000), 1.0, 5000.0) == (5000, "")      # exactly at it
-    size, why = affordable_size((30, 600, 5000), 1.0, 4999.0)
-    assert size == 600 and "5000" in why and "1.39 CPU-hours" in why       # 5000 s / 3600
-    size, why = affordable_size((30, 600, 5000), 2.0, 59.0)
-    assert size == 0 and why.startswith("sizes 30, 600, 5000 left out")
+    # costs: a30 = 30, b30 = 60, b600 = 1200, a5000 = 5000: a's large size would starve b's
+    got = allocate_sizes({"a": (1.0, (30, 5000)), "b": (2.0, (30, 600))}, 1500.0)
+    assert got["b"] == (600, "") and got["a"][0] == 30
+    assert "5000" in got["a"][1] and "1.39 CPU-hours" in got["a"][1]          # 5000 s / 3600
+    assert allocate_sizes({"a": (1.0, (30, 5000))}, 5030.0)["a"] == (5000, "")  # exactly at it
+    assert allocate_sizes({"a": (2.0, (30,))}, 59.0)["a"][0] == 0
 
 
 def test_an_extended_study_adds_its_cost_and_a_recomputed_one_replaces_it(tmp_path):
