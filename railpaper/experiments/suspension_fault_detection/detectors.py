@@ -1,10 +1,12 @@
-"""The three detectors of the appendix, each a statistic after every sample of one record
+"""The four detectors of the appendix, each a statistic after every sample of one record
 (alarms, thresholds and delays are those of
 :mod:`~railpaper.experiments.suspension_fault_detection.evidence`).
 
 * :func:`residual_cusum` — the classical residual test: the nominal model's Kalman filter, its
   whitened innovations and Page's CUSUM against a growth of their variance
   (:mod:`railpaper.engine.residual_alarms`; Basseville & Nikiforov 1993);
+* :func:`windowed_chi2` — the same innovations' squared norm summed over a sliding window (a
+  χ² test: it also sees a change of their mean or direction, which a variance CUSUM misses);
 * :func:`rbpf_departure` — paper 003's RBPF (Liu–West artificial evolution at every step, the
   paper's scheme) over the two parameters a fault may change, K_sy and C_saly; the statistic is
   the larger relative departure of their estimates from nominal;
@@ -13,7 +15,7 @@
   (:mod:`railpaper.engine.changepoint`); the statistic is the posterior probability that a
   fault has happened by now.
 
-All three filter with the record's own process noise (the track input's changes, chapter 003)
+All of them filter with the record's own process noise (the track input's changes, chapter 003)
 from the state at rest; the sample time is the run's ``dt_s``.
 """
 
@@ -34,15 +36,32 @@ from railpaper.models import lateral_16state
 P0_SCALE = 1e-10
 
 
-def residual_cusum(system, theta: np.ndarray, record: LateralRecord, variance_ratio: float
-                   ) -> np.ndarray:
-    """CUSUM g_k (K,) of the nominal filter's whitened innovations against their variance
-    growing ``variance_ratio``-fold."""
+def nominal_innovations(system, theta: np.ndarray, record: LateralRecord) -> np.ndarray:
+    """The nominal model's Kalman filter's whitened innovations z_k (K, p) on the record:
+    N(0, I) while the vehicle is healthy and the model is right."""
     nominal = system(theta[None])
     one = LinearGaussianBatch(nominal.F[0], nominal.Q, nominal.H[0], nominal.R, nominal.B[0])
-    z = whitened_innovations(one, record.y, np.zeros(lateral_16state.N_STATES),
-                             P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps).z
+    return whitened_innovations(one, record.y, np.zeros(lateral_16state.N_STATES),
+                                P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps).z
+
+
+def residual_cusum(system, theta: np.ndarray, record: LateralRecord, variance_ratio: float,
+                   innovations: np.ndarray | None = None) -> np.ndarray:
+    """CUSUM g_k (K,) of the nominal filter's whitened innovations against their variance
+    growing ``variance_ratio``-fold (``innovations``: :func:`nominal_innovations`, if already
+    computed)."""
+    z = nominal_innovations(system, theta, record) if innovations is None else innovations
     return cusum_variance(z, variance_ratio)
+
+
+def windowed_chi2(innovations: np.ndarray, window: int) -> np.ndarray:
+    """The windowed χ² test's statistic (K,): s_k = Σ_{i=k−W+1..k} ‖z_i‖², the squared whitened
+    innovations of the last ``window`` samples (fewer at the start), χ²(W p) while healthy.
+    Unlike the variance CUSUM it also sees a change of the innovations' mean or direction."""
+    energy = np.sum(np.asarray(innovations, float) ** 2, axis=1)
+    total = np.cumsum(energy)
+    total[window:] = total[window:] - total[:-window]
+    return total
 
 
 def hypotheses(faults: list[Fault], theta: np.ndarray) -> tuple[list[str], np.ndarray]:
@@ -140,5 +159,6 @@ def rbpf_departure(relative: np.ndarray) -> np.ndarray:
     return np.max(np.abs(relative - 1.0), axis=1)
 
 
-__all__ = ["ExactPosterior", "exact_change_posterior", "hypotheses", "rbpf_departure",
-           "rbpf_estimates", "residual_cusum", "tracked_system"]
+__all__ = ["ExactPosterior", "exact_change_posterior", "hypotheses", "nominal_innovations",
+           "rbpf_departure", "rbpf_estimates", "residual_cusum", "tracked_system",
+           "windowed_chi2"]

@@ -148,8 +148,11 @@ def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.
     steps = np.round(grid_s / settings.dt_s).astype(int) + 1
     exact = detectors.exact_change_posterior(system, theta, rec.record, values, steps,
                                              fault_settings["p_no_fault"])
+    innovations = detectors.nominal_innovations(system, theta, rec.record)
     statistics = {"residual": detectors.residual_cusum(system, theta, rec.record,
-                                                       settings.cusum_variance_ratio),
+                                                       settings.cusum_variance_ratio,
+                                                       innovations),
+                  "chi2": detectors.windowed_chi2(innovations, settings.chi2_window_samples),
                   "exact": exact.p_changed}
     j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     estimate = {}

@@ -24,7 +24,8 @@ from railpaper.experiments.suspension_fault_detection.tables import (
 )
 
 #: Colour and marker of each detector.
-DETECTOR_STYLES = {"residual": ("C0", "o"), "rbpf": ("C2", "s"), "exact": ("C3", "D")}
+DETECTOR_STYLES = {"residual": ("C0", "o"), "chi2": ("C1", "v"), "rbpf": ("C2", "s"),
+                   "exact": ("C3", "D")}
 #: Colours of the tracked parameters' estimates.
 PARAMETER_COLOURS = ("C0", "C1")
 #: Where a censored delay ("beyond the record") is drawn, as a multiple of the longest delay a
@@ -69,16 +70,18 @@ def record_around_fault(result, settings: Settings):
     speed = run.speed_kmh
     stats = run.statistics
     has_rbpf = "rbpf" in stats and ill.rbpf_relative is not None
-    panels = (["estimates"] if has_rbpf else []) + [d for d in ("residual", "exact", "rbpf")
-                                                     if d in stats]
+    panels = (["estimates"] if has_rbpf else []) + [
+        d for d in ("residual", "chi2", "exact", "rbpf") if d in stats]
     fig, axes = plt.subplots(len(panels), 1, figsize=(7, 1.75 * len(panels) + 0.6),
                              sharex=True, squeeze=False)
     axes = axes[:, 0]
     K = len(next(iter(stats.values())))
     t = ill.dt_s * np.arange(1, K + 1)
     titles = {"estimates": "RBPF estimates", "residual": DETECTORS["residual"],
+              "chi2": DETECTORS["chi2"],
               "exact": DETECTORS["exact"], "rbpf": "RBPF departure from nominal"}
-    ylabels = {"residual": "CUSUM statistic", "exact": "P(fault happened)",
+    ylabels = {"residual": "CUSUM statistic", "chi2": "windowed χ² statistic",
+               "exact": "P(fault happened)",
                "rbpf": "max |θ̂/θ − 1|"}
     for letter, ax, panel in zip("abcd", axes, panels):
         ax.set_title(f"({letter}) {titles[panel]}", fontsize=9, loc="left")

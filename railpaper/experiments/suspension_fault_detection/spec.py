@@ -49,6 +49,9 @@ SPEC = ChapterSpec(
           "fault-free records), 1", positive=True, changes_records=False),
         P("cusum_variance_ratio", 2.0, "float", "residual test: the growth of the whitened "
           "innovations' variance its CUSUM is tuned to, 1", positive=True),
+        P("chi2_window_samples", 50, "int", "windowed chi-square test: the samples of whitened "
+          "innovations it sums (50 = 50 ms at 1 kHz), samples", minimum=1,
+          changes_records=False),
         P("rbpf_records_per_fault", 12, "int", "records per fault (the first ones, first speed) "
           "also filtered by the RBPF", quick=2, minimum=2, changes_records=False),
         P("rbpf_fault_free_records", 16, "int", "fault-free records (first speed) filtered by "
@@ -68,6 +71,7 @@ Settings = SPEC.settings_type
 
 #: The detectors compared, with their display names.
 DETECTORS = {"residual": "residual CUSUM (nominal Kalman filter)",
+             "chi2": "windowed chi-square of the whitened innovations (nominal Kalman filter)",
              "rbpf": "RBPF estimate leaves its band (paper 003)",
              "exact": "exact change posterior (Kalman bank over fault times)"}
 

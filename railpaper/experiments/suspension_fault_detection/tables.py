@@ -22,10 +22,12 @@ from railpaper.experiments.suspension_fault_detection.spec import (
 )
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
-DETECTOR_SHORT = {"residual": "residual CUSUM", "rbpf": "RBPF band", "exact": "exact posterior"}
+DETECTOR_SHORT = {"residual": "residual CUSUM", "chi2": "windowed χ²", "rbpf": "RBPF band",
+                  "exact": "exact posterior"}
 
 #: What each detector's alarm statistic is (its threshold's meaning, dimensionless).
 STATISTICS = {"residual": "CUSUM log-likelihood ratio of the whitened innovations",
+              "chi2": "sum of the squared whitened innovations over the window",
               "rbpf": "largest relative departure of the RBPF estimate from nominal",
               "exact": "posterior probability that a fault has happened"}
 

@@ -166,3 +166,17 @@ def test_drift_schedule_ends_at_its_factor(setup):
     assert starts[1] == 1000 and starts[-1] == 1000 + int(round(fault_settings["drift_s"] / 5e-4))
     t = np.array([0.5, 1.0, 2.0, 3.0, 4.0])
     assert np.allclose(faults.factor_at(fault, fault_settings, t, 1.0), [1, 1, 0.75, 0.5, 0.5])
+
+
+def test_windowed_chi2_is_the_sliding_sum_of_squared_innovations():
+    import numpy as np
+
+    from railpaper.experiments.suspension_fault_detection.detectors import windowed_chi2
+
+    z = np.arange(12.0).reshape(6, 2)                   # energies 1, 13, 41, 85, 145, 221
+    energy = (z ** 2).sum(axis=1)
+    brute = [energy[max(0, k - 2):k + 1].sum() for k in range(6)]          # window 3
+    assert windowed_chi2(z, 3).tolist() == brute
+    healthy = np.random.default_rng(5).standard_normal((20_000, 5))
+    s = windowed_chi2(healthy, 50)[49:]
+    assert abs(s.mean() - 250.0) < 3.0                   # χ²(W p): mean W p = 250, sd 22
