@@ -6,6 +6,8 @@ of both, independent of any detector:
 
 * :func:`cusum_alarms` — the one-sided CUSUM recursion ``S_k = max(0, S_{k-1} + x_k)`` with an
   alarm when ``S_k > h`` and a restart at zero after each alarm (how a monitor keeps running);
+* :func:`restarted_cusum_alarms` — the same alarms from the stored path of a CUSUM that was run
+  without restarts (its increments are recoverable wherever the path is positive);
 * :func:`mean_time_between_false_alarms_h` — fault-free running time over the alarms in it, in
   hours, with the one-sided lower confidence bound of a Poisson count (so 0 alarms in 10 h still
   says "at least 3.3 h", not "infinite");
@@ -47,6 +49,24 @@ def cusum_alarms(increments: Sequence[float], threshold: float) -> list[int]:
         if s > threshold:
             alarms.append(k)
             s = 0.0
+    return alarms
+
+
+def restarted_cusum_alarms(path: Sequence[float], threshold: float) -> list[int]:
+    """Alarms (1-based steps) of a CUSUM restarted at zero after each alarm, from the path
+    ``g_k = max(0, g_{k-1} + l_k)`` of the same CUSUM run without restarts (what a detector
+    stores).  Exact up to rounding: where ``g_k > 0`` the increment is ``l_k = g_k − g_{k−1}``; where
+    ``g_k = 0`` the restarted path, never above the unrestarted one, is 0 too."""
+    if threshold <= 0:
+        raise ValueError(f"the CUSUM threshold must be positive, got {threshold}")
+    g = np.asarray(path, float)
+    alarms, restarted, previous = [], 0.0, 0.0
+    for k, value in enumerate(g, start=1):
+        restarted = max(0.0, restarted + value - previous) if value > 0 else 0.0
+        previous = value
+        if restarted > threshold:
+            alarms.append(k)
+            restarted = 0.0
     return alarms
 
 
@@ -170,4 +190,4 @@ def detected_within(times: Sequence[float], observed: Sequence[bool], horizon_s:
 
 __all__ = ["FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve", "cusum_alarms",
            "cusum_average_run_length", "detected_within", "kaplan_meier", "kaplan_meier_median",
-           "mean_time_between_false_alarms_h"]
+           "mean_time_between_false_alarms_h", "restarted_cusum_alarms"]

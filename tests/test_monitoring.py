@@ -86,3 +86,16 @@ def test_kaplan_meier_median_without_censoring_is_the_lower_sample_median():
 def test_kaplan_meier_median_is_unbounded_when_most_records_are_never_detected():
     result = kaplan_meier_median([1.0, 2.0, 5.0, 5.0, 5.0, 5.0], [True, True] + [False] * 4)
     assert result.median is None and result.high is None and result.detected == 2
+
+
+def test_restarted_alarms_from_a_stored_path_equal_the_restarted_recursion():
+    from railpaper.monitoring import restarted_cusum_alarms
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        increments = rng.normal(-0.2, 1.0, 500)
+        path, g = [], 0.0
+        for x in increments:                              # the detector's path, no restarts
+            g = max(0.0, g + x)
+            path.append(g)
+        assert restarted_cusum_alarms(path, 3.0) == cusum_alarms(increments, 3.0)
