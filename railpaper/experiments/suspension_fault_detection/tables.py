@@ -107,10 +107,10 @@ def faults_table(result) -> str:
 
 def detection_table(result, settings: Settings) -> str:
     """One table per speed (the run's order, each under a bold "<speed> km/h" line), one row
-    per fault and for each detector the median detection delay with its 95 % interval over
-    records (s; "beyond the record" where fewer than half the records alarm after the fault)
-    and the shares of records detected within the shortest and the longest horizon; "—" for a
-    detector not run at that speed."""
+    per fault and one column per detector: the median detection delay with its 95 % interval
+    over records (s; "beyond the record" where fewer than half the records alarm after the
+    fault), then the shares of records detected within the shortest and the longest horizon;
+    "—" for a detector not run at that speed."""
     short, long_ = WITHIN_S[0], WITHIN_S[-1]
     out = []
     for speed in settings.speeds_kmh:
@@ -121,18 +121,19 @@ def detection_table(result, settings: Settings) -> str:
                       for f in result.faults
                       if f"delay_median_s_{det}_{f.name}_{sk}_n" in result.metrics), None)
             records = "" if n is None else f", {number(n)} record{'s' if n != 1 else ''}"
-            columns += [f"{DETECTOR_SHORT[det]}: median delay [95 %] (s{records})",
-                        f"{DETECTOR_SHORT[det]}: within {short:g} s / {long_:g} s"]
+            columns.append(f"{DETECTOR_SHORT[det]}: median delay [95 %] (s{records}); "
+                           f"detected within {short:g} s / {long_:g} s")
         rows = []
         for f in result.faults:
             row = [f.label]
             for det in DETECTORS:
                 tag = f"{det}_{f.name}_{sk}"
-                row.append(interval_text(result.metrics, f"delay_median_s_{tag}", delay_text,
-                                         censored=True))
+                delay = interval_text(result.metrics, f"delay_median_s_{tag}", delay_text,
+                                      censored=True)
                 a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
                 b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
-                row.append(NONE if a is None or b is None else f"{percent(a)} / {percent(b)}")
+                row.append(delay if a is None or b is None
+                           else f"{delay}; {percent(a)} / {percent(b)}")
             rows.append(row)
         out.append(f"**{speed:g} km/h**\n\n" + markdown(pd.DataFrame(rows, columns=columns)))
     return "\n".join(out)
