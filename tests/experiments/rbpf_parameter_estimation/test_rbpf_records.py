@@ -28,6 +28,12 @@ def small(**changes):
     return chapter.SPEC.resolve(dict(SMALL, **changes), True)
 
 
+@pytest.fixture(scope="module")
+def small_run():
+    """One run of the chapter at the small settings, in this process (shared by the tests)."""
+    return chapter.run(small())
+
+
 def test_the_chapter_exposes_its_studies():
     assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme",
                                          "lateral_ekf", "model_error"]
@@ -70,9 +76,9 @@ def _same(a: dict, b: dict) -> bool:
         for k in a)
 
 
-def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client):
+def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client, small_run):
     settings = small()
-    here = chapter.run(settings)
+    here = small_run
     store = EvidenceStore(tmp_path)
     there = chapter.run(settings, record_map=stored_map(store, client=dask_client))
     assert _same(here.metrics, there.metrics)
@@ -87,10 +93,10 @@ def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client)
 
 @pytest.mark.parametrize("study, table", [(lateral.EKF, "records_lateral_ekf"),
                                           (mismatch.MODEL_ERROR, "records_model_error")])
-def test_the_rows_kept_by_the_run_are_the_study_s_rows(study, table):
+def test_the_rows_kept_by_the_run_are_the_study_s_rows(study, table, small_run):
     """The first records of the EKF and model-error studies are computed inside the chapter run
     (with more EKF guesses on the first record); their rows equal the study's own."""
     settings = small()
-    kept = chapter.run(settings).extra_tables[table]
+    kept = small_run.extra_tables[table]
     pd.testing.assert_frame_equal(kept, study.rows(settings, tuple(kept.seed)).pipe(
         lambda frame: frame[kept.columns]).astype(kept.dtypes.to_dict()), check_exact=True)
