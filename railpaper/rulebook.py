@@ -220,16 +220,16 @@ def paired_change(baseline: Sequence[float], other: Sequence[float], direction: 
         raise ValueError(f"direction must be one of {DIRECTIONS}, got {direction!r}")
     r, low, high = relative_change(baseline, other, level)
     sign = 1.0 if direction == "increase" else -1.0
-    effect, e_low, e_high = sign * r, min(sign * low, sign * high), max(sign * low, sign * high)
+    e_low, e_high = min(sign * low, sign * high), max(sign * low, sign * high)
     text = (f"relative change {r:+.3g} [{low:+.3g}, {high:+.3g}] (n = {len(baseline)}); claimed "
             f"{direction} beyond {margin:g}")
+    # the statistic shown is the signed relative change r itself (a reader compares it with the
+    # claimed direction); the verdict reads its interval turned into the claimed direction
     if e_low > margin:
-        return Decision("reproduced", f"{text}: wholly beyond it", effect, e_low, e_high,
-                        len(baseline))
+        return Decision("reproduced", f"{text}: wholly beyond it", r, low, high, len(baseline))
     if e_high < margin:
-        return Decision("differs", f"{text}: wholly short of it", effect, e_low, e_high,
-                        len(baseline))
-    return Decision("undecided", f"{text}: the interval straddles it", effect, e_low, e_high,
+        return Decision("differs", f"{text}: wholly short of it", r, low, high, len(baseline))
+    return Decision("undecided", f"{text}: the interval straddles it", r, low, high,
                     len(baseline))
 
 
@@ -319,8 +319,8 @@ def implementation(measured_rate_hz: float | None, required_rate_hz: float | Non
         return Decision("undecided", f"no measured rate against {required_rate_hz:g} Hz")
     met = measured_rate_hz >= required_rate_hz
     return Decision("reproduced" if met else "differs",
-                    f"{measured_rate_hz:.4g} Hz measured against the {required_rate_hz:g} Hz "
-                    f"{source or 'required'}", measured_rate_hz)
+                    f"{measured_rate_hz:.4g} Hz measured on this machine against the "
+                    f"{required_rate_hz:g} Hz {source or 'required'}", measured_rate_hz)
 
 
 def cost_ratio(ratio: float, low: float, high: float, direction: str, margin: float,

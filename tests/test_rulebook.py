@@ -208,3 +208,10 @@ def test_departure_is_the_mirror_of_equivalence(deviations, verdict):
     decision = departure(deviations, margin=0.1)
     assert decision.verdict == verdict == mirror[equivalence(deviations, margin=0.1).verdict]
     assert decision.statistic == pytest.approx(np.mean(deviations))
+
+
+def test_paired_change_shows_the_signed_change_whatever_the_claimed_direction():
+    # the other is 3.24 times the baseline: +2.24, a "decrease" claim differs, its number stays +
+    decision = paired_change([1.0, 1.0, 1.0, 1.0], [3.2, 3.3, 3.2, 3.26], "decrease", 0.1)
+    assert decision.verdict == "differs"
+    assert decision.statistic == pytest.approx(2.24) and decision.low < 2.24 < decision.high
