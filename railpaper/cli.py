@@ -149,7 +149,8 @@ def cmd_evidence(args) -> int:
         if client is not None:
             close_client(client, cluster)
     for item in done:
-        state = item.skipped or f"{item.size} records"
+        state = "; ".join(part for part in (f"{item.size} records" if item.size else "",
+                                             item.skipped) if part)
         print(f"{item.chapter} {item.study}: {state}")
     return 0
 

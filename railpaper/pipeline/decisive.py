@@ -164,8 +164,8 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
         per_record = rates[key]
         if skipped:
             progress(f"railpaper: {item.chapter} {item.study}: {skipped}")
-        if size == 0:
-            done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record,
+        if size == 0:                    # every registered size left out
+            done.append(StudyPlan(**{**item.__dict__, "size": 0, "cpu_s_per_record": per_record,
                                      "skipped": skipped}))
             continue
         item = StudyPlan(**{**item.__dict__, "size": size, "skipped": skipped})
