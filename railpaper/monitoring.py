@@ -160,7 +160,8 @@ def kaplan_meier_median(times: Sequence[float], observed: Sequence[bool],
                         level: float = 0.95) -> MedianDelay:
     """Median of the Kaplan–Meier curve (the first event time with S ≤ ½) and the
     Brookmeyer–Crowley interval: the event times whose log–log transformed pointwise interval
-    of S(t) contains ½ (Greenwood's variance)."""
+    of S(t) contains ½ (Greenwood's variance), reported as the first and the last of them (the
+    set holds on to the next event time; some software reports that one as the upper end)."""
     curve = kaplan_meier(times, observed)
     z = float(scipy_stats.norm.ppf(0.5 + level / 2))
     at = curve.survival <= 0.5
