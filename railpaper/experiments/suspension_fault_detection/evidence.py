@@ -25,7 +25,12 @@ import pandas as pd
 from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
-from railpaper.monitoring import detected_within, kaplan_meier_median
+from railpaper.monitoring import (
+    detected_within,
+    kaplan_meier_median,
+    mean_time_between_false_alarms_h,
+    restarted_cusum_alarms,
+)
 from railpaper.stats import median_interval, quantile_ranks, rate
 
 #: Points of each ROC curve (thresholds), at most.
@@ -101,6 +106,31 @@ def false_alarm_metrics(runs: list[RecordRun], detector: str, h: float, first_ro
             f"false_alarms_per_hour_{tag}_low": est.low * per_hour,
             f"false_alarms_per_hour_{tag}_high": est.high * per_hour,
             f"false_alarms_per_hour_{tag}_n": est.n}
+
+
+def cusum_false_alarms(paths, h: float, first_row: int, dt_s: float) -> tuple[int, float]:
+    """False alarms of the residual CUSUM on fault-free records, the detector restarted after
+    each alarm (:func:`railpaper.monitoring.restarted_cusum_alarms` on each stored path from the
+    monitoring start, alarm when the statistic exceeds ``h``), and the running time they were
+    watched, s (each record's real length: records end early at flange contact)."""
+    alarms, running_s = 0, 0.0
+    for path in paths:
+        watched = np.asarray(path, float)[first_row:]
+        alarms += len(restarted_cusum_alarms(watched, h))
+        running_s += watched.size * dt_s
+    return alarms, running_s
+
+
+def mean_time_between_false_alarms_metrics(alarms: int, running_s: float, tag: str) -> dict:
+    """``false_alarms_restarted_<tag>``, ``false_alarm_running_h_<tag>``,
+    ``mtbfa_h_lower_<tag>`` (the one-sided 95 % Poisson lower bound, h) and, when there was an
+    alarm, ``mtbfa_h_<tag>`` (running hours per alarm)."""
+    est = mean_time_between_false_alarms_h(running_s, alarms)
+    m = {f"false_alarms_restarted_{tag}": alarms, f"false_alarm_running_h_{tag}": est.running_h,
+         f"mtbfa_h_lower_{tag}": est.lower_h}
+    if alarms:
+        m[f"mtbfa_h_{tag}"] = est.value_h
+    return m
 
 
 def fault_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
@@ -218,6 +248,9 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
             metrics[f"threshold_{tag}"] = h
             metrics.update(false_alarm_metrics(evaluation, detector, h, first_row, window_s,
                                                tag))
+            if detector == "residual":         # a CUSUM: restarts recoverable from its path
+                metrics.update(mean_time_between_false_alarms_metrics(*cusum_false_alarms(
+                    [r.statistics[detector] for r in evaluation], h, first_row, dt_s), tag))
             outcomes_of = {}
             for fault in faults:
                 runs = [r for r in have if r.fault == fault]

@@ -24,3 +24,20 @@ def test_delays_as_survival_data_by_hand():
     assert (m["km_delay_n_x"], m["km_delay_detected_x"]) == (4, 2)
     never = survival_delay_metrics(outcomes.assign(delay_s=np.inf), "y")
     assert not never["km_delay_median_reached_y"] and "km_delay_median_s_y" not in never
+
+
+def test_cusum_false_alarms_with_restarts_and_their_mean_time_by_hand():
+    from railpaper.experiments.suspension_fault_detection.evidence import (
+        cusum_false_alarms,
+        mean_time_between_false_alarms_metrics,
+    )
+
+    # record 1 watched from row 2: path 0.5, 1.5 (> 1: alarm, restart), then +1.0 -> 1.0 (no),
+    # then +0.5 -> 1.5 (alarm); record 2 (ended early) never above 1; 0.5 s per row
+    paths = [[9.0, 9.0, 0.5, 1.5, 2.5, 3.0], [0.0, 0.0, 0.2, 0.0]]
+    alarms, running_s = cusum_false_alarms(paths, 1.0, 2, 0.5)
+    assert (alarms, running_s) == (2, 3.0)
+    m = mean_time_between_false_alarms_metrics(2, 7200.0, "x")
+    assert m["mtbfa_h_x"] == 1.0 and m["false_alarm_running_h_x"] == 2.0
+    assert m["mtbfa_h_lower_x"] == pytest.approx(2.0 / 6.295794, rel=1e-6)
+    assert "mtbfa_h_y" not in mean_time_between_false_alarms_metrics(0, 7200.0, "y")
