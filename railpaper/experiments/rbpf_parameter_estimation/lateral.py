@@ -41,11 +41,11 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRun,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
-from railpaper.models import lateral_16state
 from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
+from railpaper.models import lateral_16state
 from railpaper.settling import holds_from, settling_step
-from railpaper.threads import one_thread
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
+from railpaper.threads import one_thread
 
 WITHIN = 0.05
 #: The paper's claim: every parameter within :data:`WITHIN` after this many steps.
@@ -132,6 +132,18 @@ def lateral_ekf(settings: Settings, fixed, theta, record: LateralRecord, seed, g
     return runs
 
 
+def final_errors(norm: np.ndarray, prefix: str = "final_relative_error_") -> dict:
+    """``<prefix><param>``: θ̂/θ − 1 at the last step of normalised estimates ``norm`` (K, 5),
+    per parameter (1; NaN where the run diverged)."""
+    return {f"{prefix}{name}": float(norm[-1, j] - 1.0)
+            for j, name in enumerate(lateral_16state.PARAM_NAMES)}
+
+
+def ekf_diverged(norm: np.ndarray) -> bool:
+    """A lateral EKF run stopped (its normalised estimates are NaN after a divergence)."""
+    return not bool(np.all(np.isfinite(norm[-1])))
+
+
 def ekf_converged(norm: np.ndarray) -> bool:
     """A lateral EKF run is convergent and meaningful: every final estimate within 5 %."""
     return bool(np.all(np.isfinite(norm[-1])) and np.all(np.abs(norm[-1] - 1) <= WITHIN))
@@ -163,12 +175,9 @@ def scheme_row(seed: int, norm: np.ndarray, start: int = CLAIM_STEP, tol: float 
     ``final_relative_error_<param>`` (θ̂/θ − 1 at the last step, 1)."""
     with np.errstate(invalid="ignore"):
         at = bool(np.all(np.abs(norm[start - 1] - 1.0) <= tol))
-    row = {"seed": int(seed),
-           "within_5pct_from_350": bool(holds_from(np.abs(norm - 1.0) <= tol, start).all()),
-           "within_5pct_at_350": at}
-    row.update({f"final_relative_error_{name}": float(norm[-1, j] - 1.0)
-                for j, name in enumerate(lateral_16state.PARAM_NAMES)})
-    return row
+    return {"seed": int(seed),
+            "within_5pct_from_350": bool(holds_from(np.abs(norm - 1.0) <= tol, start).all()),
+            "within_5pct_at_350": at, **final_errors(norm)}
 
 
 def scheme_rows(settings: Settings, seeds, scheme: str) -> pd.DataFrame:
@@ -208,11 +217,8 @@ def ekf_row(seed: int, norm: np.ndarray) -> dict:
     ``norm`` (K, 5; NaN after a divergence): ``ekf_converged`` (every final estimate within 5 %,
     :func:`ekf_converged`), ``ekf_diverged`` (the run stopped) and
     ``final_relative_error_<param>`` (1; NaN after a divergence)."""
-    row = {"seed": int(seed), "ekf_converged": ekf_converged(norm),
-           "ekf_diverged": not bool(np.all(np.isfinite(norm[-1])))}
-    row.update({f"final_relative_error_{name}": float(norm[-1, j] - 1.0)
-                for j, name in enumerate(lateral_16state.PARAM_NAMES)})
-    return row
+    return {"seed": int(seed), "ekf_converged": ekf_converged(norm),
+            "ekf_diverged": ekf_diverged(norm), **final_errors(norm)}
 
 
 def ekf_rows(settings: Settings, seeds) -> pd.DataFrame:

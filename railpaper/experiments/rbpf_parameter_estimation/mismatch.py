@@ -204,11 +204,6 @@ def simulate_mismatch(settings: Settings, fixed: dict, theta: np.ndarray, seed: 
     return record, diag
 
 
-def _diverged(norm: np.ndarray) -> bool:
-    """The EKF run stopped (the chapter's runs are NaN after a divergence)."""
-    return not bool(np.all(np.isfinite(norm[-1])))
-
-
 def _filter_record(settings: Settings, fixed, theta, rec, seed, guesses
                    ) -> tuple[dict, np.ndarray, list]:
     """Working-scheme RBPF and ``guesses`` EKF runs on one record; the row of ``records``."""
@@ -216,12 +211,11 @@ def _filter_record(settings: Settings, fixed, theta, rec, seed, guesses
     ekf = lateral.lateral_ekf(settings, fixed, theta, rec, seed, guesses)
     row = dict(seed=seed, ekf_converged=lateral.ekf_converged(ekf[0]),
                ekf_converged_count=int(sum(map(lateral.ekf_converged, ekf))),
-               ekf_diverged=_diverged(ekf[0]), ekf_diverged_count=int(sum(map(_diverged, ekf))),
+               ekf_diverged=lateral.ekf_diverged(ekf[0]),
+               ekf_diverged_count=int(sum(map(lateral.ekf_diverged, ekf))),
                rbpf_all_within=bool(holds_from(np.abs(norm - 1.0) <= lateral.WITHIN, START).all()),
-               **{f"rbpf_final_error_{n}": float(norm[-1, j] - 1)
-                  for j, n in enumerate(lateral_16state.PARAM_NAMES)},
-               **{f"ekf_final_error_{n}": float(ekf[0][-1, j] - 1)
-                  for j, n in enumerate(lateral_16state.PARAM_NAMES)})
+               **lateral.final_errors(norm, "rbpf_final_error_"),
+               **lateral.final_errors(ekf[0], "ekf_final_error_"))
     return row, norm, ekf
 
 
@@ -232,7 +226,7 @@ def plant_metrics(rows: pd.DataFrame, runs: list, ekf_first: list, suffix: str,
                                                                ekf_first)))}
     if guesses == 10:
         out[f"ekf_lateral_converged_of_10{suffix}"] = out[f"ekf_lateral_converged_count{suffix}"]
-    out[f"ekf_lateral_diverged_count{suffix}"] = int(sum(map(_diverged, ekf_first)))
+    out[f"ekf_lateral_diverged_count{suffix}"] = int(sum(map(lateral.ekf_diverged, ekf_first)))
     out.update(rate(rows.ekf_converged.to_numpy(bool))
                .metrics(f"lateral_ekf_converge_rate{suffix}"))
     out.update(rate(rows.rbpf_all_within.to_numpy(bool))
