@@ -120,8 +120,13 @@ def map_in_process(study: RecordStudy, settings: Any, seeds: Sequence[int],
         done += len(chunk)
         progress(done / max(len(seeds), 1), f"{study.name}: {done}/{len(seeds)} records")
     if not frames:
-        return pd.DataFrame({"seed": pd.Series([], dtype="int64")})
+        return no_rows()
     return normalised(pd.concat(frames, ignore_index=True))
+
+
+def no_rows() -> pd.DataFrame:
+    """The rows of no record: an empty table with its ``seed`` column."""
+    return pd.DataFrame({"seed": pd.Series([], dtype="int64")})
 
 
 def assert_chunk_invariant(study: RecordStudy, settings: Any, seeds: Sequence[int]) -> None:
@@ -142,4 +147,4 @@ def assert_chunk_invariant(study: RecordStudy, settings: Any, seeds: Sequence[in
 
 
 __all__ = ["RecordMap", "RecordStudy", "RowsFunction", "assert_chunk_invariant", "checked_rows",
-           "column_types", "map_in_process", "normalised", "read_rows"]
+           "column_types", "map_in_process", "no_rows", "normalised", "read_rows"]

@@ -47,6 +47,7 @@ from railpaper.experiments.records import (
     RecordStudy,
     checked_rows,
     column_types,
+    no_rows,
     normalised,
     read_rows,
 )
@@ -207,8 +208,7 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
     def record_map(study: RecordStudy, settings: Any, seeds: Sequence[int],
                    progress: ProgressCallback = no_progress) -> pd.DataFrame:
         seeds = [int(s) for s in seeds]
-        stored = store.read(study, settings) if store is not None else pd.DataFrame(
-            {"seed": pd.Series([], dtype="int64")})
+        stored = store.read(study, settings) if store is not None else no_rows()
         stored = stored[stored["seed"].isin(seeds)]
         if store is not None and len(stored):
             store.verify(study, settings, stored, commit)
@@ -241,7 +241,7 @@ def stored_map(store: EvidenceStore | None, *, client: Any = None, commit: str |
             for future in as_completed(futures):
                 finished(futures[future], future.result())
         if not frames:
-            return pd.DataFrame({"seed": pd.Series([], dtype="int64")})
+            return no_rows()
         table = pd.concat(frames, ignore_index=True).set_index("seed").loc[seeds].reset_index()
         return normalised(table)
 

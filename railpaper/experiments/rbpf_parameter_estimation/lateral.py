@@ -41,7 +41,13 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRun,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
-from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
+from railpaper.experiments.records import (
+    RecordMap,
+    RecordStudy,
+    map_in_process,
+    no_rows,
+    normalised,
+)
 from railpaper.models import lateral_16state
 from railpaper.settling import holds_from, settling_step
 from railpaper.stats import max_abs_bias, mean_interval, median_interval, rate
@@ -328,7 +334,7 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
     for scheme, study, wanted in (("paper", PAPER_SCHEME, settings.paper_records),
                                   ("working", WORKING_SCHEME, settings.working_records)):
         if user:                                          # no truth: no per-record rows
-            scheme_tables[scheme] = pd.DataFrame({"seed": pd.Series([], dtype="int64")})
+            scheme_tables[scheme] = no_rows()
             continue
         field = "rbpf_paper_norm" if scheme == "paper" else "rbpf_working_norm"
         first = normalised(pd.DataFrame([scheme_row(r.seed, getattr(r, field)) for r in runs]))
@@ -339,7 +345,7 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
                               lambda fraction, message: progress(0.7 + 0.2 * fraction, message))
             first = pd.concat([first, more], ignore_index=True)
         scheme_tables[scheme] = first
-    ekf_table = (pd.DataFrame({"seed": pd.Series([], dtype="int64")}) if user else
+    ekf_table = (no_rows() if user else
                  normalised(pd.DataFrame([ekf_row(r.seed, r.ekf_norm[0]) for r in runs])))
     for scheme in ("working", "paper"):
         # the records filtered here (the first n_records), RBPF alone: the rate it sustains

@@ -161,8 +161,9 @@ def survival_delay_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
     fields ``km_delay_median_reached_<tag>`` / ``km_delay_high_bounded_<tag>`` (False: not
     detected on enough records for the median, or its upper end; the number is then absent,
     never coded), and ``km_detected_within_<d>s_<tag>``."""
-    detected = np.isfinite(outcomes["delay_s"].to_numpy(float))
-    times = np.where(detected, outcomes["delay_s"].to_numpy(float),
+    delay = outcomes["delay_s"].to_numpy(float)
+    detected = np.isfinite(delay)
+    times = np.where(detected, delay,
                      np.where(outcomes["early"].to_numpy(bool), 0.0,
                               outcomes["watched_s"].to_numpy(float)))
     if times.size == 0:
