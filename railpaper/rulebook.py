@@ -17,7 +17,9 @@ threshold of a claim's own.
 * :func:`equivalence` — similarity or absence: two one-sided tests against ±margin;
   :func:`departure` — a claimed offset ('biased'), its mirror;
 * :func:`deterministic`, :func:`design`, :func:`implementation` — exact values, stated checks
-  and rates; :func:`cost_ratio` — a time ratio or share measured on this machine.
+  and rates; :func:`cost_ratio` — a time ratio or share measured on this machine;
+* :func:`soundness` (procedure version 2) — a *reproduced* read off an estimator that is wrong
+  about itself on most of the same records is an *artefact*.
 
 Sample sizes come from power, before the deciding run (:func:`rate_size`,
 :func:`continuous_size`, :func:`single_run_size`).
@@ -32,6 +34,7 @@ Sample sizes come from power, before the deciding run (:func:`rate_size`,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass
@@ -44,7 +47,7 @@ from scipy import stats as scipy_stats
 from railpaper.paths import DATA_DIR
 
 VOCABULARY_FILE = DATA_DIR / "vocabulary.toml"
-VERDICTS = ("reproduced", "differs", "undecided", "not testable")
+VERDICTS = ("reproduced", "artefact", "differs", "undecided", "not testable")
 PROCEDURES = ("single-run", "population-rate", "paired-change", "equivalence", "departure",
               "deterministic", "design", "implementation")
 DIRECTIONS = ("increase", "decrease")
@@ -296,6 +299,32 @@ def departure(deviations: Sequence[float] | None = None, margin: float = 0.1,
                     mirror.low, mirror.high, mirror.n)
 
 
+def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold: float = 0.5,
+              level: float = 0.95) -> Decision:
+    """A verdict read off an estimator's output, checked against that estimator's soundness
+    on the same records: ``sound`` of ``n`` records where it ends within two of its own
+    posterior standard deviations of the truth.  A *reproduced* becomes an *artefact* when the
+    Clopper–Pearson interval of ``sound / n`` lies wholly below ``threshold``: the claimed
+    number (a convergence step, an error, a gain) comes from a filter whose uncertainty excludes
+    the truth on most records.  Every other verdict, and a sound estimator's, is returned as it
+    is.
+
+    >>> soundness(Decision("reproduced", "settles at step 4"), "qgrbpf", 8, 150).verdict
+    'artefact'
+    >>> soundness(Decision("reproduced", "settles at step 4"), "qgrbpf", 70, 150).verdict
+    'reproduced'
+    """
+    if decision.verdict != "reproduced":
+        return decision
+    low, high = clopper_pearson(sound, n, level)
+    if high >= threshold:
+        return decision
+    return dataclasses.replace(decision, verdict="artefact", reason=(
+        f"{decision.reason}; but the {estimator} ends within two of its own posterior standard "
+        f"deviations of the truth on only {sound}/{n} of these records [{low:.3g}, {high:.3g}], "
+        f"wholly below {threshold:g}: the number comes from a filter that is wrong about itself"))
+
+
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:
     """An exact quantity: *reproduced* when ``|value − paper_value| ≤ resolution / 2`` (the
     paper's printed precision), else *differs*."""
@@ -388,6 +417,7 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
 
 
 __all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
-           "clopper_pearson", "continuous_size", "cost_ratio", "departure", "deterministic", "design", "equivalence",
-           "implementation", "mid_rank_tail", "most_favourable", "paired_change",
-           "population_rate", "rate_size", "relative_change", "relative_change_sd", "single_run", "single_run_size"]
+           "clopper_pearson", "continuous_size", "cost_ratio", "departure", "deterministic",
+           "design", "equivalence", "implementation", "mid_rank_tail", "most_favourable",
+           "paired_change", "population_rate", "rate_size", "relative_change",
+           "relative_change_sd", "single_run", "single_run_size", "soundness"]

@@ -39,13 +39,14 @@ import json
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
-from railpaper.data import DataError
-from railpaper.paths import DATA_DIR
+import numpy as np
 import pandas as pd
 
 from railpaper import rulebook
+from railpaper.data import DataError
+from railpaper.paths import DATA_DIR
 from railpaper.rulebook import (
     DIRECTIONS,
     Decision,
@@ -263,10 +264,12 @@ def register(declarations: list[Declaration], vocabulary: Vocabulary,
             continue
         history = list(old.get("history", [])) if old else []
         if old is not None:
-            history.append({k: old[k] for k in ("fingerprint", "size", "date", "declaration")})
+            history.append({k: old[k] for k in ("fingerprint", "size", "date", "declaration")}
+                           | {"procedure_version": old.get("procedure_version", 1)})
             revised.append(d.key)
         new[d.key] = {"fingerprint": current, "size": size, "date": date,
-                      "declaration": d.canonical(), "history": history}
+                      "declaration": d.canonical(), "history": history,
+                      "procedure_version": vocabulary.policy["procedure_version"]}
     chapters = {d.chapter for d in declarations}
     kept = {d.key for d in declarations}
     for key, entry in registry.items():          # a row no longer declared: kept, marked
@@ -282,9 +285,21 @@ def write_registry(registry: dict[str, dict[str, Any]], path: Path = REGISTRY_FI
 
 
 def revisions(registry: dict[str, dict[str, Any]]) -> int:
-    """Rows registered more than once or dropped after registration: the intro's revision
-    count."""
-    return sum(1 for entry in registry.values() if entry.get("history") or entry.get("dropped"))
+    """Rows whose declaration or registered size changed after registration, or that were
+    dropped: the intro's revision count.  A row re-registered only because the decision
+    procedures' version changed (the same declaration, the same size) is not a revision of the
+    claim: :func:`procedure_reregistrations` counts those."""
+    def states(entry):
+        return {json.dumps([h["declaration"], h["size"]], sort_keys=True)
+                for h in [*entry.get("history", []), entry]}
+    return sum(1 for entry in registry.values() if entry.get("dropped") or len(states(entry)) > 1)
+
+
+def procedure_reregistrations(registry: dict[str, dict[str, Any]]) -> int:
+    """Rows registered again under a new version of the decision procedures."""
+    return sum(1 for entry in registry.values()
+               if len({h.get("procedure_version", 1)
+                       for h in [*entry.get("history", []), entry]}) > 1)
 
 
 def first_records(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame | None:
@@ -297,12 +312,19 @@ def first_records(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame |
 
 
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
-           metrics: dict[str, Any], size: int | None = None) -> Decision:
+           metrics: dict[str, Any], size: int | None = None,
+           procedure_version: int | None = None) -> Decision:
     """The row's verdict by its class's procedure: from the per-record ``rows`` of its study
     (single-run, rates, changes, equivalences) or the run's ``metrics`` (deterministic, design,
     implementation).  A sampled row with fewer records than its registered ``size`` is
-    *undecided* and says how many it needs."""
+    *undecided* and says how many it needs.
+
+    ``procedure_version`` (the vocabulary's by default) selects the procedures a row was
+    registered under, so that an earlier verdict can be shown beside today's.  Version 2 adds
+    the estimator's soundness (:func:`railpaper.rulebook.soundness`), counts a per-record NaN
+    as never happened, and reads design rows as yes/no checks only."""
     d, policy = declaration, vocabulary.policy
+    version = policy["procedure_version"] if procedure_version is None else procedure_version
     entry = vocabulary.entry(d.word_class)
     if d.procedure == "equivalence" and not d.study:       # one exact value of the run
         value = metrics.get(d.metrics[0])
@@ -325,20 +347,26 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
                             "(sizes by power, before the deciding run)", n=len(rows))
     left_out = ""
     if d.procedure in ("paired-change", "equivalence", "departure"):
-        never = (rows[list(d.metrics)].to_numpy(float) == policy["never_code"]).any(axis=1)
+        values = rows[list(d.metrics)].to_numpy(float)
+        never = values == policy["never_code"]
+        if version >= 2:               # a filter that diverged gave no number: never happened
+            never |= np.isnan(values)
+        never = never.any(axis=1)
+        coded = (f"coded {policy['never_code']:g}" if version < 2
+                 else f"coded {policy['never_code']:g} or not a number")
         if never.mean() > policy["never_share_max"]:
             return Decision("undecided", f"on {int(never.sum())} of {len(rows)} records it never "
-                            f"happened (coded {policy['never_code']:g}), more than "
+                            f"happened ({coded}), more than "
                             f"{policy['never_share_max']:.0%}: the rest would be a selected subset",
                             n=len(rows))
         if never.any():
             rows = rows[~never]
-            left_out = (f"; {int(never.sum())} record(s) where it never happened (coded "
-                        f"{policy['never_code']:g}) left out")
+            left_out = f"; {int(never.sum())} record(s) where it never happened ({coded}) left out"
     decision = _sampled(d, entry, policy, rows)
     if decision is not None:
-        return dataclasses.replace(decision, reason=decision.reason + left_out) if left_out \
-            else decision
+        if left_out:
+            decision = dataclasses.replace(decision, reason=decision.reason + left_out)
+        return _sound(d, decision, rows, policy) if version >= 2 else decision
     values = [metrics.get(m) for m in d.metrics]
     if d.procedure == "implementation":
         if d.paper_rate_hz is not None or not d.direction:
@@ -353,12 +381,47 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     if any(v is None for v in values):
         return Decision("undecided", f"the run has no metric {d.metrics[values.index(None)]!r}")
     if d.procedure == "design":
+        if version >= 2 and not all(_is_yes_no(v) for v in values):
+            return Decision("undecided", f"a design row reads yes/no checks; {d.metrics[0]!r} "
+                            "is a number (declare it as an exact value)")
         return rulebook.design(all(bool(v) for v in values), d.claim)
     resolution = d.resolution or (0.0,) * len(d.metrics)
     decisions = [rulebook.deterministic(v, p, r) for v, p, r in
                  zip(values, d.paper_value, resolution)]
     differing = [x for x in decisions if x.verdict == "differs"]
     return differing[0] if differing else decisions[0]
+
+
+def _is_yes_no(value: Any) -> bool:
+    """A boolean, or a number that is exactly 0 or 1 (a yes/no stored in JSON or CSV)."""
+    return isinstance(value, (bool, np.bool_)) or (
+        isinstance(value, (int, float, np.integer, np.floating)) and float(value) in (0.0, 1.0))
+
+
+def estimators_read(d: Declaration, columns: Sequence[str], prefix: str) -> list[str]:
+    """The estimators whose output a row reads: for each metric, the longest ``<m>`` with a
+    soundness column ``<prefix><m>`` among ``columns`` such that the metric is that column or
+    ends in ``_<m>`` (``settling_step_a_qgrbpf_printed`` reads ``qgrbpf_printed``, not
+    ``rbpf``)."""
+    estimators = [c[len(prefix):] for c in columns if c.startswith(prefix)]
+    read = []
+    for metric in d.metrics:
+        matching = [m for m in estimators if metric == prefix + m or metric.endswith("_" + m)]
+        if matching:
+            read.append(max(matching, key=len))
+    return list(dict.fromkeys(read))
+
+
+def _sound(d: Declaration, decision: Decision, rows: pd.DataFrame,
+           policy: dict[str, Any]) -> Decision:
+    """Version 2: the decision checked against the soundness of each estimator it reads, on the
+    same records (:func:`railpaper.rulebook.soundness`)."""
+    prefix = policy["soundness_prefix"]
+    for estimator in estimators_read(d, list(rows.columns), prefix):
+        sound = rows[prefix + estimator].astype(bool)
+        decision = rulebook.soundness(decision, estimator, int(sound.sum()), len(sound),
+                                      policy["soundness_threshold"], policy["level"])
+    return decision
 
 
 def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
@@ -388,5 +451,6 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "decide", "fingerprint", "first_records", "load_declarations", "load_registry", "parse",
-           "register", "registered_size", "revisions", "write_registry"]
+           "decide", "estimators_read", "fingerprint", "first_records", "load_declarations",
+           "load_registry", "parse", "procedure_reregistrations", "register", "registered_size",
+           "revisions", "write_registry"]

@@ -49,6 +49,7 @@ from railpaper.pipeline.declarations import (
     first_records,
     load_declarations,
     load_registry,
+    procedure_reregistrations,
     revisions,
 )
 from railpaper.pipeline.evidence_store import EvidenceStore
@@ -354,15 +355,14 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
             + (f", n = {decision.n}" if decision.n else ""))
         revised, original = "", ""
         if entry.get("history") and run is not None:
-            before = entry["history"][-1]
-            revised = (f"declaration re-registered on {entry['date']} (previous of "
-                       f"{before['date']}, fingerprint {before['fingerprint']})")
+            before, revised = previous_registration(entry, vocabulary)
             old = Declaration(**{k: tuple(v) if isinstance(v, list) else v
                                  for k, v in before["declaration"].items()})
             old = dataclasses.replace(old, procedure=vocabulary.entry(old.word_class)["procedure"])
             old_rows = (study_rows(chapter, old.study, out, run, before["size"])[0]
                         if old.study else None)
-            original = decide(old, vocabulary, old_rows, values, before["size"]).verdict
+            original = decide(old, vocabulary, old_rows, values, before["size"],
+                              before.get("procedure_version", 1)).verdict
         rows.append(LedgerRow(chapter, d.id, d.claim, d.source, paper, ours, verdict,
                               decision.reason, d.reading, d.id.split("__")[0],
                               f"{d.procedure} ({d.word_class})", list(d.paper_value) or None,
@@ -373,6 +373,23 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
                               evidence=evidence))
     mark_headlines(rows)
     return rows
+
+
+def previous_registration(entry: dict, vocabulary: Vocabulary) -> tuple[dict, str]:
+    """The registration a row's earlier verdict is shown under, and a sentence saying what
+    changed: the last one with another declaration or size (a revision of the claim), else the
+    last one (the same declaration under earlier decision procedures)."""
+    history = entry["history"]
+    changed = [h for h in history
+               if (h["declaration"], h["size"]) != (entry["declaration"], entry["size"])]
+    if changed:
+        before = changed[-1]
+        return before, (f"declaration re-registered on {entry['date']} (previous of "
+                        f"{before['date']}, fingerprint {before['fingerprint']})")
+    before = history[-1]
+    return before, (f"the same declaration re-registered on {entry['date']} under decision "
+                    f"procedures version {vocabulary.policy['procedure_version']} (registered "
+                    f"under version {before.get('procedure_version', 1)} on {before['date']})")
 
 
 def build_ledger(chapters: list[str], chapters_dir: str | Path,
@@ -458,7 +475,9 @@ def _row_detail(r: LedgerRow) -> str:
     method = f" (method: {r.method})" if r.method else ""
     line = (f"  - {reading}{method}, {r.kind}: paper {r.paper}; ours {r.ours} — "
             f"{verdict_badge(r.verdict)} {r.reason}")
-    if r.revised:
+    if r.revised and r.procedure:
+        line += f" *Registered before: {r.revised}; then:* {verdict_badge(r.original_verdict)}"
+    elif r.revised:
         line += (f" *Rule revised after its numbers were seen ({r.revised}); under the original "
                  f"rule:* {verdict_badge(r.original_verdict)}")
     return line.replace("\n", " ").replace("$", "\\$")
@@ -627,11 +646,18 @@ def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None)
     revised = sum(bool(r.revised) for r in v2)
     registry = load_registry()
     declared = sum(1 for key in registry if key.split("/")[0] in {r.chapter for r in rows})
-    lines = [f"{headline(rows)} ({len(rows)} rows with the readings). Of the {len(v2)} rows "
-             f"still under v2 rules, {revised} were revised after their numbers were seen; of "
-             f"the {declared} rows ever declared under the rulebook, {revisions(registry)} were "
-             "re-registered or dropped since (data/claims_registry.json keeps every earlier "
-             "declaration).", ""]
+    older = [f"Of the {len(v2)} rows still under v2 rules, {revised} were revised after "
+             "their numbers were seen. "] if v2 else []
+    moved = [r for r in rows if r.procedure and r.revised and r.original_verdict
+             and r.original_verdict != r.verdict]
+    lines = [f"{headline(rows)} ({len(rows)} rows with the readings). " + "".join(older)
+             + f"Of the {declared} rows ever declared under the rulebook, {revisions(registry)} "
+             "had their declaration revised or were dropped since their first registration; "
+             f"{procedure_reregistrations(registry)} were registered again, unchanged, under "
+             f"version {Vocabulary.load().policy['procedure_version']} of the decision "
+             f"procedures, and {len(moved)} rows of this run read otherwise than under the "
+             "registration before (each shown beside its earlier verdict; "
+             "data/claims_registry.json keeps every earlier declaration).", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"

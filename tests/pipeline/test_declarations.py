@@ -16,9 +16,11 @@ from railpaper.pipeline import declarations
 from railpaper.pipeline.declarations import (
     check_registry,
     decide,
+    estimators_read,
     fingerprint,
     parse,
     register,
+    procedure_reregistrations,
     registered_size,
     revisions,
 )
@@ -70,7 +72,7 @@ def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size()
     other_class = copy.deepcopy(VOCABULARY)
     other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
     assert fingerprint(d, other_class, 785) == base
-    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=2))
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=3))
     assert fingerprint(d, newer, 785) != base
 
 
@@ -147,7 +149,8 @@ def test_never_happened_is_left_out_and_counted_or_undecides():
     rows.loc[:3, "time_s_200kmh"] = -1.0                     # 4 % never converged: left out
     decision = decide(declaration(), VOCABULARY, rows, {})
     assert decision.verdict == "reproduced" and decision.n == 96
-    assert "4 record(s) where it never happened (coded -1) left out" in decision.reason
+    assert "4 record(s) where it never happened (coded -1 or not a number) left out" \
+        in decision.reason
     rows.loc[:5, "time_s_60kmh"] = -1.0                      # 6 %: a selected subset
     decision = decide(declaration(), VOCABULARY, rows, {})
     assert decision.verdict == "undecided" and "6 of 100 records" in decision.reason
@@ -184,3 +187,77 @@ def test_railpaper_check_fails_on_an_unregistered_or_changed_declaration(monkeyp
     rows = check.registry_rows("reduced-order-observer")
     assert rows and all(r.status.startswith("FAIL: reduced-order-observer/") for r in rows)
     assert "not registered in data/claims_registry.json" in rows[0].status
+
+
+# ---- procedure version 2: soundness, a diverged run, yes/no design checks ---------------------
+
+def _settling_rows(n=150, sound_qg=8, seed=3):
+    """A single-run row's study: settling steps of two filters and their soundness columns."""
+    rng = np.random.default_rng(seed)
+    return pd.DataFrame({"settling_step_a_qgrbpf": rng.integers(3, 8, n).astype(float),
+                         "settling_step_a_rbpf": rng.integers(40, 70, n).astype(float),
+                         "satisfactory_qgrbpf": np.arange(n) < sound_qg,
+                         "satisfactory_rbpf": np.ones(n, bool)})
+
+
+SETTLES = dict(kind="single-run", word_class="value", direction="",
+               metrics=["settling_step_a_qgrbpf", "settling_step_a_rbpf"],
+               paper_value=[5.0, 55.0], resolution=[1.0, 5.0], horizon="step 300")
+
+
+def test_estimators_read_take_the_longest_name_with_a_soundness_column():
+    columns = ["satisfactory_rbpf", "satisfactory_qgrbpf", "satisfactory_qgrbpf_printed"]
+    row = declaration(metrics=["settling_step_a_qgrbpf_printed", "settling_step_a_rbpf"])
+    assert estimators_read(row, columns, "satisfactory_") == ["qgrbpf_printed", "rbpf"]
+    assert estimators_read(declaration(metrics=["satisfactory_qgrbpf"], word_class="absolute",
+                                       direction=""), columns, "satisfactory_") == ["qgrbpf"]
+    assert estimators_read(declaration(), columns, "satisfactory_") == []    # no filter's column
+
+
+def test_a_plausible_draw_from_an_unsound_filter_is_an_artefact_under_version_2():
+    rows = _settling_rows(sound_qg=8)           # 8/150 sound: upper bound 0.102 < 0.5
+    row = declaration(**SETTLES)
+    first = decide(row, VOCABULARY, rows, {}, procedure_version=1)
+    assert first.verdict == "reproduced"
+    second = decide(row, VOCABULARY, rows, {}, procedure_version=2)
+    assert second.verdict == "artefact" and "qgrbpf" in second.reason
+    assert "only 8/150" in second.reason and second.statistic == first.statistic
+    # at the threshold's boundary: 63/150 has upper bound 0.5024 (>= 0.5), 62/150 has 0.4959
+    assert decide(row, VOCABULARY, _settling_rows(sound_qg=63), {}).verdict == "reproduced"
+    assert decide(row, VOCABULARY, _settling_rows(sound_qg=62), {}).verdict == "artefact"
+
+
+def test_a_diverged_run_counts_as_never_happened_under_version_2():
+    rng = np.random.default_rng(1)
+    base = 1.0 + 0.1 * rng.standard_normal(100)
+    rows = pd.DataFrame({"time_s_60kmh": base, "time_s_200kmh": base * 1.3})
+    rows.loc[:2, "time_s_200kmh"] = np.nan                 # 3 % diverged
+    assert decide(declaration(), VOCABULARY, rows, {}, procedure_version=1).verdict \
+        == "undecided"                                       # NaN interval under version 1
+    decision = decide(declaration(), VOCABULARY, rows, {}, procedure_version=2)
+    assert decision.verdict == "reproduced" and decision.n == 97
+    rows.loc[:5, "time_s_60kmh"] = np.nan                    # 6 %: a selected subset
+    assert decide(declaration(), VOCABULARY, rows, {}).verdict == "undecided"
+
+
+def test_a_design_row_reads_yes_no_checks_only_under_version_2():
+    row = declaration(kind="design", word_class="design", metrics=["observer_dimension"],
+                      study="", direction="")
+    assert decide(row, VOCABULARY, None, {"observer_dimension": 6}, procedure_version=1
+                  ).verdict == "reproduced"                  # version 1: any non-zero number
+    assert decide(row, VOCABULARY, None, {"observer_dimension": 6}).verdict == "undecided"
+    assert decide(row, VOCABULARY, None, {"observer_dimension": True}).verdict == "reproduced"
+    assert decide(row, VOCABULARY, None, {"observer_dimension": 0.0}).verdict == "differs"
+
+
+def test_a_new_procedure_version_is_a_reregistration_not_a_revision_of_the_claim():
+    d = declaration()
+    first, _ = register([d], VOCABULARY.__class__(
+        policy=dict(VOCABULARY.policy, procedure_version=1), classes=VOCABULARY.classes),
+        {}, {d.key: 785}, "2026-12-01")
+    again, revised = register([d], VOCABULARY, first, {d.key: 785}, "2026-12-06")
+    assert revised == [d.key] and again[d.key]["history"][0]["procedure_version"] == 1
+    assert revisions(again) == 0 and procedure_reregistrations(again) == 1
+    changed, _ = register([declaration(direction="decrease")], VOCABULARY, again,
+                          {d.key: 785}, "2026-12-07")
+    assert revisions(changed) == 1 and procedure_reregistrations(changed) == 1
