@@ -322,7 +322,8 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     ``procedure_version`` (the vocabulary's by default) selects the procedures a row was
     registered under, so that an earlier verdict can be shown beside today's.  Version 2 adds
     the estimator's soundness (:func:`railpaper.rulebook.soundness`), counts a per-record NaN
-    as never happened, and reads design rows as yes/no checks only."""
+    as never happened, reads design rows as yes/no checks only, and makes a paired change from
+    a baseline that is 0 on every record undecided (version 1 raised)."""
     d, policy = declaration, vocabulary.policy
     version = policy["procedure_version"] if procedure_version is None else procedure_version
     entry = vocabulary.entry(d.word_class)
@@ -362,7 +363,7 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
         if never.any():
             rows = rows[~never]
             left_out = f"; {int(never.sum())} record(s) where it never happened ({coded}) left out"
-    decision = _sampled(d, entry, policy, rows)
+    decision = _sampled(d, entry, policy, rows, version)
     if decision is not None:
         if left_out:
             decision = dataclasses.replace(decision, reason=decision.reason + left_out)
@@ -425,7 +426,7 @@ def _sound(d: Declaration, decision: Decision, rows: pd.DataFrame,
 
 
 def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
-             rows: pd.DataFrame | None) -> Decision | None:
+             rows: pd.DataFrame | None, version: int) -> Decision | None:
     """The procedures that read per-record rows (None for the others)."""
     level = policy["level"]
     if d.procedure == "single-run":
@@ -437,6 +438,10 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
         return rulebook.population_rate(int(hits.sum()), len(hits), entry["threshold"],
                                         entry.get("direction", "at least"), level)
     if d.procedure == "paired-change":
+        baseline_mean = float(np.mean(rows[d.metrics[0]].to_numpy(float)))
+        if baseline_mean == 0.0 and version >= 2:
+            return Decision("undecided", f"the baseline {d.metrics[0]!r} is 0 on every record: "
+                            "a change relative to it is undefined", n=len(rows))
         return rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
                                       rows[d.metrics[1]].to_numpy(float), d.direction,
                                       entry["margin"], level)

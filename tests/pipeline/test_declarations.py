@@ -261,3 +261,11 @@ def test_a_new_procedure_version_is_a_reregistration_not_a_revision_of_the_claim
     changed, _ = register([declaration(direction="decrease")], VOCABULARY, again,
                           {d.key: 785}, "2026-12-07")
     assert revisions(changed) == 1 and procedure_reregistrations(changed) == 1
+
+
+def test_a_change_from_a_baseline_that_never_happens_is_undecided_under_version_2():
+    rows = pd.DataFrame({"time_s_60kmh": np.zeros(40), "time_s_200kmh": np.ones(40)})
+    decision = decide(declaration(), VOCABULARY, rows, {})
+    assert decision.verdict == "undecided" and "undefined" in decision.reason
+    with pytest.raises(ValueError, match="baseline's mean is 0"):
+        decide(declaration(), VOCABULARY, rows, {}, procedure_version=1)
