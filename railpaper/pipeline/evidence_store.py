@@ -67,13 +67,15 @@ class EvidenceStoreError(PipelineError):
 
 def current_commit(repo: Path = REPO_DIR) -> str:
     """``git rev-parse HEAD`` of the checkout, with ``+dirty`` when tracked files differ from it
-    (``unknown`` outside a git checkout)."""
+    (``unknown`` outside a git checkout).  The stored evidence itself (``data/evidence``) is
+    what a run writes, not what computes it: rows written, extended or removed there do not make
+    the commit dirty."""
     def git(*args: str) -> subprocess.CompletedProcess:
         return subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True)
     head = git("rev-parse", "HEAD")
     if head.returncode != 0:
         return "unknown"
-    dirty = git("diff", "--quiet", "HEAD", "--").returncode != 0
+    dirty = git("diff", "--quiet", "HEAD", "--", ".", ":(exclude)data/evidence").returncode != 0
     return head.stdout.strip() + ("+dirty" if dirty else "")
 
 

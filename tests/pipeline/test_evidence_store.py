@@ -188,3 +188,26 @@ def test_assert_chunk_invariant_catches_a_batch_that_changes_bits():
     assert_chunk_invariant(STUDY, SPEC.resolve(), (4, 1, 9))
     with pytest.raises(AssertionError, match="one seed at a time"):
         assert_chunk_invariant(RecordStudy("demo", "bad", batch_mean), None, (4, 1, 9))
+
+
+def test_the_commit_is_dirty_for_code_changes_not_for_the_stored_evidence(tmp_path):
+    """A run writing or removing rows under data/evidence keeps the commit clean; any other
+    tracked change marks it +dirty."""
+    import subprocess
+
+    from railpaper.pipeline.evidence_store import current_commit
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+    (tmp_path / "data" / "evidence").mkdir(parents=True)
+    (tmp_path / "data" / "evidence" / "rows.csv").write_text("seed\n0\n")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "c")
+    head = current_commit(tmp_path)
+    assert len(head) == 40 and not head.endswith("+dirty")
+    (tmp_path / "data" / "evidence" / "rows.csv").unlink()
+    assert current_commit(tmp_path) == head
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert current_commit(tmp_path) == head + "+dirty"
