@@ -16,6 +16,7 @@ $(BIN)/railpaper: environment.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --require-hashes --no-deps --no-compile -r environment.lock
 	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib > /dev/null
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
+	$(BIN)/railpaper compile --jobs 2
 	touch $(BIN)/railpaper
 
 # MathJax 3 for the offline book, pinned by book/_mathjax/package-lock.json. It lives outside

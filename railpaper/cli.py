@@ -1,4 +1,5 @@
-"""The ``railpaper`` command: list, run, check, compare, sweep, bands, build, track, bench.
+"""The ``railpaper`` command: list, run, check, compare, sweep, bands, build, track, bench,
+register, evidence, compile.
 
 Every user error ends in one line on stderr (``railpaper: error: ...``) and exit status 2;
 no traceback.
@@ -152,6 +153,17 @@ def cmd_evidence(args) -> int:
         state = "; ".join(part for part in (f"{item.size} records" if item.size else "",
                                              item.skipped) if part)
         print(f"{item.chapter} {item.study}: {state}")
+    return 0
+
+
+def cmd_compile(args) -> int:
+    from railpaper.pipeline.chapters import paper_chapters
+    from railpaper.pipeline.kernels import compile_kernels
+    if args.jobs < 1:
+        raise ValueError(f"compile: --jobs must be >= 1, got {args.jobs}")
+    say = (lambda line: print(line, file=sys.stderr, flush=True)) if args.verbose else None
+    seconds = compile_kernels(paper_chapters(), args.jobs, progress=say)
+    print(f"railpaper: numba kernels compiled into their cache in {seconds:.0f} s")
     return 0
 
 
@@ -311,6 +323,12 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--workers", type=int, metavar="K", help="K local worker processes")
     where.add_argument("--scheduler", metavar="ADDRESS", help="an existing dask cluster")
     p.set_defaults(func=cmd_evidence)
+
+    p = sub.add_parser("compile", help="compile the numba kernels into their on-disk cache once "
+                       "(make venv does this): one record of every study")
+    p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
+    p.add_argument("--verbose", action="store_true", help="one line per study compiled")
+    p.set_defaults(func=cmd_compile)
 
     p = sub.add_parser("compare", help="two runs of a chapter side by side: parameters, metrics, "
                        "verdicts")

@@ -18,6 +18,7 @@ from railpaper import cli
     (["run", "reduced-order-observer", "-p", "duration_s", "-1"], "must be > 0"),
     (["run", "reduced-order-observer", "-p", "seed", "1.5"], "expects an integer"),
     (["check", "nope"], "unknown chapter 'nope'"),
+    (["compile", "--jobs", "0"], "--jobs must be >= 1"),
     (["track", "--spectrum", "fra-9", "-o", "x.csv"], "fra-9"),
     (["track", "--spectrum", "fra-5", "--component", "sideways", "-o", "x.csv"], "sideways"),
     (["track", "--spectrum", "fra-5", "--dx-m", "0", "-o", "x.csv"], "dx"),
