@@ -16,7 +16,6 @@ $(BIN)/railpaper: environment.lock pyproject.toml
 	$(BIN)/python -m pip install --quiet --require-hashes --no-deps --no-compile -r environment.lock
 	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib > /dev/null
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
-	$(BIN)/railpaper compile --jobs 2
 	touch $(BIN)/railpaper
 
 # MathJax 3 for the offline book, pinned by book/_mathjax/package-lock.json. It lives outside
@@ -43,7 +42,15 @@ chromium:
 	  sudo apt-get update -q >/dev/null && sudo DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null; \
 	else echo "make: the rendering test needs Chromium: run 'sudo apt-get install chromium' (Debian/Ubuntu), then 'make test' again" >&2; exit 1; fi
 
-test: venv chromium
+# The engine's numba kernels compiled into numba's on-disk cache once, before the test workers and
+# the quick book's chapter processes start together and would each compile them (railpaper
+# compile: one record of every study on two processes); again only when the package changes.
+KERNELS := $(VENV)/.numba-kernels
+$(KERNELS): $(BIN)/railpaper $(shell find railpaper -name '*.py')
+	$(BIN)/railpaper compile --jobs 2
+	touch $(KERNELS)
+
+test: venv chromium $(KERNELS)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 # Regenerate the hashed lock from pyproject.toml (needs uv: `pip install uv`).
