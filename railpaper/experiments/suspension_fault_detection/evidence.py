@@ -23,7 +23,11 @@ import numpy as np
 import pandas as pd
 
 from railpaper.engine import first_alarm
-from railpaper.experiments.suspension_fault_detection.result import RecordRun, speed_key
+from railpaper.experiments.suspension_fault_detection.result import (
+    NO_FAULT,
+    RecordRun,
+    speed_key,
+)
 from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
 from railpaper.monitoring import (
     detected_within,
@@ -203,6 +207,17 @@ def flange_metrics(runs: list[RecordRun], tag: str) -> dict:
     return m
 
 
+def fault_free_flange_metrics(runs: list[RecordRun], tag: str) -> dict:
+    """How often records with no fault reach flange contact within their length
+    (``flange_contact_rate_fault_free_<speed>`` with its interval, and the count): the running
+    every fault's rate is read against, and records whose detectors watch less than the window
+    because they end there."""
+    hit = rate([r.flange_contact for r in runs])
+    key = f"flange_contact_rate_fault_free_{tag}"
+    return {key: hit.value, f"{key}_low": hit.low, f"{key}_high": hit.high, f"{key}_n": hit.n,
+            f"flange_contacts_fault_free_{tag}": int(sum(r.flange_contact for r in runs))}
+
+
 def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
              outcomes_of, detector: str, first_row: int, window_s: float) -> list[dict]:
     """ROC points of one detector and speed: per fault, false alarms per hour on all the
@@ -236,6 +251,9 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
         for fault in faults:
             metrics.update(flange_metrics([r for r in at if r.fault == fault],
                                           f"{fault}_{speed_key(speed)}"))
+        free = [r for r in at if r.fault == NO_FAULT]
+        if free:
+            metrics.update(fault_free_flange_metrics(free, speed_key(speed)))
         for detector in detectors:
             have = [r for r in at if detector in r.statistics]
             calibration = [r for r in have if r.role == "calibration"]

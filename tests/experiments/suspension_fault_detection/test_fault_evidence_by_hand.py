@@ -41,3 +41,26 @@ def test_cusum_false_alarms_with_restarts_and_their_mean_time_by_hand():
     assert m["mtbfa_h_x"] == 1.0 and m["false_alarm_running_h_x"] == 2.0
     assert m["mtbfa_h_lower_x"] == pytest.approx(2.0 / 6.295794, rel=1e-6)
     assert "mtbfa_h_y" not in mean_time_between_false_alarms_metrics(0, 7200.0, "y")
+
+
+def test_fault_free_flange_contacts_counted_by_hand():
+    """Five fault-free records at 300 km/h, one of which ends at flange contact: 1/5 with its
+    Clopper-Pearson interval (0.00505, 0.716), and the page's sentence."""
+    from railpaper.experiments.suspension_fault_detection.evidence import (
+        fault_free_flange_metrics,
+    )
+    from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, RecordRun
+    from railpaper.experiments.suspension_fault_detection.tables import fault_free_flange_text
+
+    runs = [RecordRun(NO_FAULT, "evaluation", 300.0, seed, -1.0, 4.0 - (seed == 2), seed == 2,
+                      {}, {}, 1.0) for seed in range(5)]
+    m = fault_free_flange_metrics(runs, "300kmh")
+    assert m["flange_contact_rate_fault_free_300kmh"] == 0.2
+    assert m["flange_contacts_fault_free_300kmh"] == 1
+    assert m["flange_contact_rate_fault_free_300kmh_n"] == 5
+    assert m["flange_contact_rate_fault_free_300kmh_low"] == pytest.approx(0.00505, abs=1e-5)
+    assert m["flange_contact_rate_fault_free_300kmh_high"] == pytest.approx(0.71642, abs=1e-5)
+    m.update(fault_free_flange_metrics(runs[:2], "200kmh"))
+    assert fault_free_flange_text(m, [300.0, 200.0]) == \
+        "1 of 5 records at 300 km/h, 0 of 2 at 200 km/h"
+    assert fault_free_flange_text({}, [300.0]) == "no fault-free records"
