@@ -6,29 +6,31 @@ import pytest
 from scipy import integrate, signal
 from scipy.linalg import expm
 
-from railpaper.estimators import functional_observer as fo
+from railpaper.estimators import functional_observer
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators.lmi_region import LMIInfeasible, in_region, region_gain
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 
 
 @pytest.fixture(scope="module")
 def model():
-    return v10.build_model(v10.load_parameters())
+    return vertical_10dof.build_model(vertical_10dof.load_parameters())
 
 
 @pytest.fixture(scope="module")
 def paper_observer(model):
-    return fo.design(model.A, model.B, model.output_matrix("both"), model.L, 10.0, 2.0)
+    return functional_observer.design(model.A, model.B, model.output_matrix("both"), model.L,
+                                      10.0, 2.0)
 
 
 def test_existence_rank_table(model):
     expected = {"displacements": (16, 20, False), "accelerations": (16, 20, False),
                 "both": (20, 20, True)}
     for name, (r_base, r_ext, ok) in expected.items():
-        ex = fo.existence(model.A, model.output_matrix(name), model.L)
+        ex = functional_observer.existence(model.A, model.output_matrix(name), model.L)
         assert (ex["rank_CA_C_L"], ex["rank_LA_CA_C_L"], ex["exists"]) == (r_base, r_ext, ok)
-    assert fo.existence(model.A, model.output_matrix("both"), model.L)["condition2"]
+    assert functional_observer.existence(model.A, model.output_matrix("both"),
+                                         model.L)["condition2"]
 
 
 def test_condition2_fails_on_hidden_unstable_mode():
@@ -36,11 +38,11 @@ def test_condition2_fails_on_hidden_unstable_mode():
     A = np.diag([1.0, -1.0, -2.0])
     C = np.array([[0.0, 1.0, 0.0]])
     L = np.array([[1.0, 0.0, 0.0]])
-    ex = fo.existence(A, C, L)
+    ex = functional_observer.existence(A, C, L)
     assert ex["condition1"] and not ex["condition2"]
     np.testing.assert_allclose(ex["pencil_zeros"], [1.0], atol=1e-9)
     with pytest.raises(LMIInfeasible):
-        fo.design(A, np.zeros((3, 1)), C, L, 1.0, 3.0)
+        functional_observer.design(A, np.zeros((3, 1)), C, L, 1.0, 3.0)
 
 
 def test_observer_identities(model, paper_observer):
@@ -60,7 +62,7 @@ def test_random_systems_design():
         A = rng.standard_normal((n, n)) - 3 * np.eye(n)
         C = rng.standard_normal((4, n))
         L = rng.standard_normal((2, n))
-        ob = fo.design(A, rng.standard_normal((n, 1)), C, L, 2.0, 3.0)
+        ob = functional_observer.design(A, rng.standard_normal((n, 1)), C, L, 2.0, 3.0)
         assert ob.residual < 1e-9
         assert in_region(ob.poles, 2.0, 3.0, rtol=1e-5)
 
@@ -69,7 +71,7 @@ def test_noise_free_error_follows_expm(model):
     """Joint plant + observer, simulated exactly (scipy lsim, input linear between samples):
     ε(t) = ẑ − z equals e^{N t} ε(0) from any initial state."""
     C = model.output_matrix("both")
-    ob = fo.design(model.A, model.B, C, model.L, 10.0, 2.0)
+    ob = functional_observer.design(model.A, model.B, C, model.L, 10.0, 2.0)
     n, p = 20, 4
     Aj = np.block([[model.A, np.zeros((n, p))], [ob.J @ C, ob.N]])
     Bj = np.vstack([model.B, ob.HB])
@@ -92,7 +94,7 @@ def test_noise_free_error_follows_expm(model):
 
 def test_discrete_observer_matches_lsim_and_hold(model):
     C = model.output_matrix("both")
-    ob = fo.design(model.A, model.B, C, model.L, 10.0, 2.0)
+    ob = functional_observer.design(model.A, model.B, C, model.L, 10.0, 2.0)
     d = ob.discretise(1e-3, "zoh")
     Phi, Gam, *_ = signal.cont2discrete((ob.N, np.hstack([ob.J, ob.HB]), np.eye(4),
                                          np.zeros((4, 16))), 1e-3, method="zoh")
@@ -115,18 +117,20 @@ def test_hb_zero_variant_poles_fixed_at_primary_corner(model):
     v = model.parameters
     corner = -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m
     C = model.output_matrix("both")
-    ob = fo.design(model.A, model.B, C, model.L, -corner / np.sqrt(2), 2.0, hb_zero=True)
+    ob = functional_observer.design(model.A, model.B, C, model.L, -corner / np.sqrt(2), 2.0,
+                                    hb_zero=True)
     np.testing.assert_allclose(ob.fixed_poles.real, corner, rtol=1e-6)
     np.testing.assert_allclose(ob.poles.real, corner, rtol=1e-5)
     assert ob.residual < 1e-10
     HB = (model.L - ob.E @ C) @ model.B
     assert np.abs(HB).max() < 1e-9 * np.abs(paper_hb(model)).max()
     with pytest.raises(LMIInfeasible):          # a region that excludes the corner
-        fo.design(model.A, model.B, C, model.L, -2 * corner, 2.0, hb_zero=True)
+        functional_observer.design(model.A, model.B, C, model.L, -2 * corner, 2.0, hb_zero=True)
 
 
 def paper_hb(model):
-    ob = fo.design(model.A, model.B, model.output_matrix("both"), model.L, 10.0, 2.0)
+    ob = functional_observer.design(model.A, model.B, model.output_matrix("both"), model.L, 10.0,
+                                    2.0)
     return ob.HB
 
 

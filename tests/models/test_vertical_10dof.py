@@ -6,18 +6,18 @@ import pytest
 from railpaper import contact
 from railpaper.data import DataError
 from railpaper.experiments.partial_state_observer.records import suspension
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 
 
 @pytest.fixture(scope="module", params=["labels", "symbols"])
 def vehicle(request):
     """Both readings of Table 1's suspension rows (paper 000; default 'labels')."""
-    return v10.load_parameters(**suspension(request.param))
+    return vertical_10dof.load_parameters(**suspension(request.param))
 
 
 @pytest.fixture(scope="module")
 def model(vehicle):
-    return v10.build_model(vehicle)
+    return vertical_10dof.build_model(vehicle)
 
 
 def hand_written(v):
@@ -67,7 +67,7 @@ def test_matrices_symmetric_and_definite(model):
 def test_static_equilibrium(vehicle, model):
     """Under gravity the springs carry the weights the free-body diagrams say."""
     g = vehicle.gravity_m_per_s2
-    d = v10.static_deflection_m(model)
+    d = vertical_10dof.static_deflection_m(model)
     Mc, Mt, Mw = vehicle.car_body_mass_kg, vehicle.bogie_mass_kg, vehicle.wheelset_mass_kg
     kH = vehicle.contact_stiffness_N_per_m
     np.testing.assert_allclose(kH * d[6:], (Mc / 4 + Mt / 2 + Mw) * g, rtol=1e-10)
@@ -87,8 +87,8 @@ def test_contact_stiffness_from_hertz(vehicle):
 
 
 def test_state_space_in_paper_order(vehicle, model):
-    assert v10.STATE_NAMES[:4] == ("z_c", "z_c_dot", "beta_c", "beta_c_dot")
-    assert v10.STATE_NAMES[12] == "z_w1"
+    assert vertical_10dof.STATE_NAMES[:4] == ("z_c", "z_c_dot", "beta_c", "beta_c_dot")
+    assert vertical_10dof.STATE_NAMES[12] == "z_w1"
     A, B = model.A, model.B
     Minv = np.linalg.inv(model.M)
     np.testing.assert_allclose(A[1::2, 0::2], -Minv @ model.K)
@@ -123,7 +123,7 @@ def test_paper_C_rows_after_correction(vehicle, model):
 
 
 def test_modal_table(vehicle, model):
-    table = v10.modal_table(model)
+    table = vertical_10dof.modal_table(model)
     assert len(table) == 10
     # body modes near 1.4-1.5 Hz, bogie modes near 6.5-8 Hz (bounce overdamped), wheelsets 229 Hz
     assert set(table["mode"][:2]) == {"car-body bounce", "car-body pitch"}
@@ -154,9 +154,9 @@ def test_modal_table(vehicle, model):
 
 
 def test_loader_rejects_missing_key(tmp_path):
-    text = (v10.data_path("partial-state-observer/parameters.toml")).read_text()
+    text = (vertical_10dof.data_path("partial-state-observer/parameters.toml")).read_text()
     head, rest = text.split("[wheel_radius_m]")
     path = tmp_path / "p.toml"
     path.write_text(head + "[gravity_m_per_s2]" + rest.split("[gravity_m_per_s2]")[1])
     with pytest.raises(DataError, match="missing key 'wheel_radius_m'"):
-        v10.load_parameters(path)
+        vertical_10dof.load_parameters(path)

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper import stats, track
-from railpaper.estimators import functional_observer as fo
+from railpaper.estimators import functional_observer
 from railpaper.experiments.partial_state_observer.records import (
     MEASUREMENT,
     MEASURES,
@@ -26,7 +26,7 @@ from railpaper.experiments.partial_state_observer.records import (
     record_column,
 )
 from railpaper.experiments.partial_state_observer.spec import Settings
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 
 #: The columns of the table of runs (:func:`runs_table`), in order.
 RUN_COLUMNS = ("reading", "seed", "speed_kmh", "estimator") + MEASURES + (
@@ -170,12 +170,12 @@ def evidence_metrics(mc: pd.DataFrame, reading: str) -> dict:
 
 # ---- deterministic evidence: existence, ranks, the printed LMI (19)
 
-def existence_table(model: v10.Model) -> pd.DataFrame:
+def existence_table(model: vertical_10dof.Model) -> pd.DataFrame:
     """Darouach's conditions for z = [z_w1 … z_w4] with each measurement set."""
     rows = []
-    for name in v10.MEASUREMENT_SETS:
+    for name in vertical_10dof.MEASUREMENT_SETS:
         C = model.output_matrix(name)
-        ex = fo.existence(model.A, C, model.L)
+        ex = functional_observer.existence(model.A, C, model.L)
         rows.append({"measurement set": name, "outputs": C.shape[0],
                      "rank [CA; C; L]": ex["rank_CA_C_L"], "rank [LA; CA; C; L]": ex["rank_LA_CA_C_L"],
                      "condition 1": ex["condition1"],
@@ -184,24 +184,26 @@ def existence_table(model: v10.Model) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def ranks(model: v10.Model) -> dict:
+def ranks(model: vertical_10dof.Model) -> dict:
     """The ranks the paper quotes after Eq. (13), ours (C = its acceleration matrix).
 
     Controllability is tested by PBH on the scaled model: the Kalman matrix [B AB … A¹⁹B] of
     the unscaled model spans ~1e100 and its numerical rank is meaningless (returned too).
     """
     Ca, L = model.output_matrix("accelerations"), model.L
-    sc = fo.scaling_for(model.A, model.output_matrix("both"), L)
+    sc = functional_observer.scaling_for(model.A, model.output_matrix("both"), L)
     At, Bt, _, _ = sc.apply(model.A, model.B, model.output_matrix("both"), L)
-    pbh = min(fo.numerical_rank(np.hstack([lam * np.eye(20) - At, Bt])) for lam in np.linalg.eigvals(At))
+    pbh = min(functional_observer.numerical_rank(np.hstack([lam * np.eye(20) - At, Bt]))
+              for lam in np.linalg.eigvals(At))
     matrix = int(np.linalg.matrix_rank(np.hstack([np.linalg.matrix_power(model.A, k) @ model.B
                                                   for k in range(20)])))
     return {"rank_Q0_pbh": pbh, "rank_Q0_matrix": matrix,
-            "rank_C_printed": fo.numerical_rank(Ca * sc.S[None, :]), "rank_L": fo.numerical_rank(L),
-            "rank_CLt_printed": fo.numerical_rank(Ca @ L.T)}
+            "rank_C_printed": functional_observer.numerical_rank(Ca * sc.S[None, :]),
+            "rank_L": functional_observer.numerical_rank(L),
+            "rank_CLt_printed": functional_observer.numerical_rank(Ca @ L.T)}
 
 
-def rank_claims(model: v10.Model) -> pd.DataFrame:
+def rank_claims(model: vertical_10dof.Model) -> pd.DataFrame:
     """The ranks the paper quotes after Eq. (13) beside ours, as a table."""
     r = ranks(model)
     rows = [("rank(Q0), controllability", 20, r["rank_Q0_pbh"],
@@ -213,12 +215,12 @@ def rank_claims(model: v10.Model) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["quantity", "paper", "ours", "note"])
 
 
-def printed_lmi19(model: v10.Model) -> dict:
+def printed_lmi19(model: vertical_10dof.Model) -> dict:
     """Whether the LMI (19) as printed can hold (see :func:`printed_lmi19_blocks`)."""
     C = model.output_matrix(MEASUREMENT)
-    sc = fo.scaling_for(model.A, C, model.L)
+    sc = functional_observer.scaling_for(model.A, C, model.L)
     At, _, Ct, Lt = sc.apply(model.A, model.B, C, model.L)
-    par = fo.parametrise(At, Ct, Lt)
+    par = functional_observer.parametrise(At, Ct, Lt)
     return printed_lmi19_blocks(par.H1, par.H2)
 
 
@@ -234,7 +236,7 @@ def printed_lmi19_blocks(H1: np.ndarray, H2: np.ndarray) -> dict:
             "lmi19_H1_norm": float(np.linalg.norm(H1))}
 
 
-def wheelset_rms(model: v10.Model, spectrum: str, band_m: tuple[float, float],
+def wheelset_rms(model: vertical_10dof.Model, spectrum: str, band_m: tuple[float, float],
                  speed_mps: float, n_points: int = 4000
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stationary RMS displacement (m), acceleration (m/s²) and contact deflection z_w − q (m),
@@ -263,7 +265,7 @@ def wheelset_rms(model: v10.Model, spectrum: str, band_m: tuple[float, float],
                  for d in (density, acceleration, deflection))
 
 
-def wheelset_similarity(model: v10.Model, spectrum: str, band_m: tuple[float, float],
+def wheelset_similarity(model: vertical_10dof.Model, spectrum: str, band_m: tuple[float, float],
                         speeds_kmh) -> dict:
     """The two wheelsets of one frame compared, over the speeds and both bogies, by the largest
     |RMS(w2)/RMS(w1) − 1| and |RMS(w4)/RMS(w3) − 1| of :func:`wheelset_rms`:

@@ -32,7 +32,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from railpaper.estimators import functional_observer as fo
+from railpaper.estimators import functional_observer
 from railpaper.experiments.base import ParameterError, default_progress
 from railpaper.experiments.partial_state_observer import evidence, records
 from railpaper.experiments.partial_state_observer.records import (
@@ -53,7 +53,7 @@ from railpaper.experiments.partial_state_observer.result import (
 )
 from railpaper.experiments.partial_state_observer.spec import Settings
 from railpaper.experiments.records import RecordMap, map_in_process
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 from railpaper.settling import settling_time_s
 from railpaper.threads import one_thread
 from railpaper.timing import steps_per_second
@@ -123,14 +123,14 @@ def alpha_sweep(ctx: Context, settings: Settings, truths: dict) -> pd.DataFrame:
     m, rows = ctx.model, []
     for alpha in settings.alpha_sweep_per_s:
         try:
-            obs = fo.design(m.A, m.B, ctx.C, m.L, alpha, settings.beta)
-        except fo.LMIInfeasible:
+            obs = functional_observer.design(m.A, m.B, ctx.C, m.L, alpha, settings.beta)
+        except functional_observer.LMIInfeasible:
             continue
         disc = obs.discretise(settings.dt_s, "zoh")
         try:
-            fo.design(m.A, m.B, ctx.C, m.L, alpha, settings.beta, hb_zero=True)
+            functional_observer.design(m.A, m.B, ctx.C, m.L, alpha, settings.beta, hb_zero=True)
             hb0_ok = True
-        except fo.LMIInfeasible:
+        except functional_observer.LMIInfeasible:
             hb0_ok = False
         for speed, tr in truths.items():
             z0 = tr["z_m"][0] + settings.initial_error_m
@@ -216,7 +216,7 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> PartialStateObs
         estimates={s: Estimates.from_dict(e) for s, e in default.items()},
         noise_free={s: Estimates.from_dict(e) for s, e in clean.items()},
         monte_carlo=mc, alpha_sweep=sweep, existence=existence_table(ctx.model),
-        modal_table=v10.modal_table(ctx.model), rank_claims=rank_claims(ctx.model))
+        modal_table=vertical_10dof.modal_table(ctx.model), rank_claims=rank_claims(ctx.model))
 
 
 def _metrics(ctxs, settings: Settings, truths, default, clean) -> dict:

@@ -52,13 +52,13 @@ import pandas as pd
 from railpaper import track
 from railpaper.data import data_path, load_quantities, values
 from railpaper.discretise import foh
-from railpaper.estimators import functional_observer as fo
+from railpaper.estimators import functional_observer
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments.base import ParameterError
 from railpaper.experiments.partial_state_observer.spec import SPEC, Settings
 from railpaper.experiments.records import RecordStudy
 from railpaper.experiments.track_shaping import shaping_filter
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 from railpaper.settling import settling_time_s
 from railpaper.threads import one_thread
 
@@ -141,7 +141,8 @@ SEED_GROUP = 10               # seeds simulated together (one chunk; bounds its 
 KALMAN_SEEDS = 20             # the Kalman baseline (an illustration, no claim) runs on these many
 
 
-def error_dynamics(disc: fo.DiscreteFunctionalObserver, n_steps: int, e0: float) -> np.ndarray:
+def error_dynamics(disc: functional_observer.DiscreteFunctionalObserver, n_steps: int,
+                   e0: float) -> np.ndarray:
     """The error dynamics alone, ``ε[k] = Φ^k ε[0]`` with every component of ε[0] = e0."""
     eps = np.empty((n_steps, disc.Phi.shape[0]))
     eps[0] = e0
@@ -164,20 +165,22 @@ class Context:
     def __init__(self, settings: Settings, reading: str):
         self.settings = settings
         self.reading = reading
-        self.vehicle = v = v10.load_parameters(**suspension(reading))
-        self.model = m = v10.build_model(self.vehicle)
+        self.vehicle = v = vertical_10dof.load_parameters(**suspension(reading))
+        self.model = m = vertical_10dof.build_model(self.vehicle)
         self.C = m.output_matrix(MEASUREMENT)
         self.plant = foh(m.A, m.B, settings.dt_s)
         try:
-            self.paper = fo.design(m.A, m.B, self.C, m.L, settings.alpha_per_s, settings.beta)
-        except fo.LMIInfeasible as exc:
+            self.paper = functional_observer.design(m.A, m.B, self.C, m.L, settings.alpha_per_s,
+                                                    settings.beta)
+        except functional_observer.LMIInfeasible as exc:
             raise ParameterError(f"parameters 'alpha_per_s', 'beta': no observer with poles in "
                                  f"[{settings.alpha_per_s:g}, "
                                  f"{settings.beta * settings.alpha_per_s:g}] 1/s ({exc})") from None
         # H B = 0 leaves no freedom: every pole sits at −K_p/C_p; a region around it
         corner = v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m
-        self.hb0 = fo.design(m.A, m.B, self.C, m.L, corner / np.sqrt(settings.beta), settings.beta,
-                             hb_zero=True)
+        self.hb0 = functional_observer.design(m.A, m.B, self.C, m.L,
+                                              corner / np.sqrt(settings.beta), settings.beta,
+                                              hb_zero=True)
         self.paper_zoh = self.paper.discretise(settings.dt_s, "zoh")
         self.paper_foh = self.paper.discretise(settings.dt_s, "foh")
         self.hb0_zoh = self.hb0.discretise(settings.dt_s, "zoh")

@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper import stats, track
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process
 from railpaper.experiments.reduced_order_observer.record import (
     _observer_batch,
@@ -50,7 +50,7 @@ from railpaper.experiments.reduced_order_observer.record import (
     profile,
 )
 from railpaper.experiments.reduced_order_observer.spec import READINGS, Settings
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 from railpaper.settling import settling_time_s
 
 #: Pole sets (1/s) the reduced-order observer is placed at to test "poles can be placed freely".
@@ -81,16 +81,17 @@ def _reading_samples(reading, settings: Settings, t_s, q, noise_y, noise_q, refe
     the same seed at the noise-reference speed, whose noise σ and standard-normal draws the
     ``_fixed_noise`` samples use at every speed (common random numbers: across speeds only the
     signal changes, not the noise)."""
-    vehicle = sw.load_parameters(p0_basis=reading)
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters(p0_basis=reading)
+    A, B = single_wheelset.state_space(vehicle)
     hold = "zoh" if settings.observer_form == "paper" else "foh"
-    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, hold)
+    observer = reduced_order_observer.design(A, B, 2, settings.observer_poles).discretise(
+        settings.dt_s, hold)
     y, z_w = _plant_batch(vehicle, settings.plant, settings.dt_s, q)
     rms_y, rms_q, rms_z = _rms(y), _rms(q), _rms(z_w)
     x2_initial = np.column_stack([np.zeros(q.shape[1]), q[0] + settings.initial_error_m])
     threshold = settings.convergence_fraction * rms_z
     window = t_s >= settings.error_window_start_s
-    force = sw.dynamic_contact_force_N(vehicle, z_w, q, settings.plant)
+    force = single_wheelset.dynamic_contact_force_N(vehicle, z_w, q, settings.plant)
     out = {"force_rms_N": _rms(force[window]), "z_w_rms_m": rms_z}
     error_free = np.empty((len(t_s), 2))                   # error dynamics alone, e[k+1] = Φ e[k]
     error_free[0] = [0.0, settings.initial_error_m]
@@ -104,7 +105,8 @@ def _reading_samples(reading, settings: Settings, t_s, q, noise_y, noise_q, refe
         y_meas = y + draw_y * settings.noise_fraction * sigma_y
         q_meas = q + draw_q * settings.track_noise_fraction * sigma_q
         z_est = _observer_batch(observer, y_meas, q_meas, x2_initial)
-        force_error = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear") - force
+        force_error = (single_wheelset.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
+                       - force)
         out[f"force_rms_error_N{noise}"] = _rms(force_error[window])
         if noise:
             continue
@@ -123,23 +125,24 @@ def _hertz_samples(reading, settings: Settings, t_s, q, columns) -> dict:
     ``force_relative_rms_error_hertz_observer``, that of the force the noise-free FOH observer
     (linear contact) estimates from the same run (the Aizerman row's first statistic, kept for
     its original rule); t ≥ ``error_window_start_s``."""
-    vehicle = sw.load_parameters(p0_basis=reading)
+    vehicle = single_wheelset.load_parameters(p0_basis=reading)
     out = {name: np.full(q.shape[1], np.nan) for name in
            ("force_relative_rms_error_hertz", "force_relative_rms_error_hertz_observer")}
     if not len(columns):
         return out
     q_sub = q[:, columns]
     y, z_w = _plant_batch(vehicle, "hertz", settings.dt_s, q_sub)
-    hertz = sw.dynamic_contact_force_N(vehicle, z_w, q_sub, "hertz")
+    hertz = single_wheelset.dynamic_contact_force_N(vehicle, z_w, q_sub, "hertz")
     window = t_s >= settings.error_window_start_s
-    linear = sw.dynamic_contact_force_N(vehicle, z_w, q_sub, "linear")
+    linear = single_wheelset.dynamic_contact_force_N(vehicle, z_w, q_sub, "linear")
     out["force_relative_rms_error_hertz"][columns] = _rms((linear - hertz)[window]) / _rms(
         hertz[window])
-    A, B = sw.state_space(vehicle)
-    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, "foh")
+    A, B = single_wheelset.state_space(vehicle)
+    observer = reduced_order_observer.design(A, B, 2, settings.observer_poles).discretise(
+        settings.dt_s, "foh")
     x2_initial = np.column_stack([np.zeros(len(columns)), q_sub[0] + settings.initial_error_m])
     z_est = _observer_batch(observer, y, q_sub, x2_initial)
-    estimated = sw.dynamic_contact_force_N(vehicle, z_est, q_sub, "linear")
+    estimated = single_wheelset.dynamic_contact_force_N(vehicle, z_est, q_sub, "linear")
     out["force_relative_rms_error_hertz_observer"][columns] = _rms(
         (estimated - hertz)[window]) / _rms(hertz[window])
     return out
@@ -416,7 +419,7 @@ def _pbh_rank(A, M, observability=False) -> int:
 
 
 def _pole_error(A, B, poles) -> float:
-    placed = np.linalg.eigvals(roo.design(A, B, 2, poles).F)
+    placed = np.linalg.eigvals(reduced_order_observer.design(A, B, 2, poles).F)
     want = np.asarray(poles, dtype=complex)
     key = lambda z: (round(z.real, 6), round(z.imag, 6))   # noqa: E731
     placed, want = sorted(placed, key=key), sorted(want, key=key)
@@ -433,10 +436,10 @@ def structure_metrics(settings: Settings) -> dict:
     import control
     out = {}
     for reading in READINGS:
-        vehicle = sw.load_parameters(p0_basis=reading)
-        A, B = sw.state_space(vehicle)
-        C = sw.paper_output_matrix(vehicle)
-        _, A12, _, A22, _, _ = roo.partition(A, B, 2)
+        vehicle = single_wheelset.load_parameters(p0_basis=reading)
+        A, B = single_wheelset.state_space(vehicle)
+        C = single_wheelset.paper_output_matrix(vehicle)
+        _, A12, _, A22, _, _ = reduced_order_observer.partition(A, B, 2)
         out[f"rank_Q0_exact_{reading}"] = exact_rank(exact_ctrb(A, B))
         out[f"rank_Q1_exact_{reading}"] = exact_rank(exact_ctrb(A.T, C.T))
         out[f"rank_reduced_exact_{reading}"] = exact_rank(exact_ctrb(A22.T, A12.T))

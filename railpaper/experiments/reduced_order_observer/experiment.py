@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper import track
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments.base import ParameterError, default_progress
 from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.experiments.reduced_order_observer import evidence, kalman, record
@@ -44,7 +44,7 @@ from railpaper.experiments.reduced_order_observer.result import (
     ReducedOrderObserverResult,
 )
 from railpaper.experiments.reduced_order_observer.spec import NOISE_SWEEP_FRACTIONS, Settings
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 from railpaper.timing import steps_per_second
 
 
@@ -60,7 +60,7 @@ def validate(settings: Settings) -> None:
     if settings.observer_form not in ("paper", "foh"):
         raise ParameterError(
             f"parameter 'observer_form' must be 'paper' or 'foh', got {settings.observer_form!r}")
-    if settings.p0_basis not in sw.P0_BASES:
+    if settings.p0_basis not in single_wheelset.P0_BASES:
         raise ParameterError(
             f"parameter 'p0_basis' must be 'wheel' or 'wheelset', got {settings.p0_basis!r}")
     if settings.mc_seeds >= 1000:
@@ -80,7 +80,7 @@ def validate(settings: Settings) -> None:
 
 def design_observers(A, B, settings: Settings) -> dict:
     """The paper's observer (12) discretised two ways: ``paper`` (ZOH) and ``foh``."""
-    observer = roo.design(A, B, 2, settings.observer_poles)
+    observer = reduced_order_observer.design(A, B, 2, settings.observer_poles)
     return {form: observer.discretise(settings.dt_s, "zoh" if form == "paper" else "foh")
             for form in ("paper", "foh")}
 
@@ -109,13 +109,13 @@ def _side_tables(vehicle, observers, settings: Settings, distance_m, profile_m, 
     def errors(observer, y, q, q_meas, z_w, force, window):
         x2 = np.column_stack([np.zeros(q.shape[1]), q[0] + e0])
         z_est = record._observer_batch(observer, y, q_meas, x2)
-        f_est = sw.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
+        f_est = single_wheelset.dynamic_contact_force_N(vehicle, z_est, q_meas, "linear")
         return _rms((f_est - force)[window]), _rms((z_est - z_w)[window])
 
     speed, fractions = settings.speeds_kmh[0], np.array(NOISE_SWEEP_FRACTIONS)
     t_s, q, ny, nq = inputs(speed, (1,))
     y, z_w = record._plant_batch(vehicle, settings.plant, dt, q[:, None])
-    force = sw.dynamic_contact_force_N(vehicle, z_w, q[:, None], settings.plant)
+    force = single_wheelset.dynamic_contact_force_N(vehicle, z_w, q[:, None], settings.plant)
     window = t_s >= settings.error_window_start_s
     y_meas = y + ny[:, None] * fractions[:, None] * _rms(y)               # (K, levels, 2)
     q_meas = np.repeat((q + nq * settings.track_noise_fraction * _rms(q))[:, None],
@@ -134,7 +134,7 @@ def _side_tables(vehicle, observers, settings: Settings, distance_m, profile_m, 
     for plant in ("linear", "hertz"):                      # cost of linearising the contact
         progress(0.55, f"{plant} plant, noise-free")
         y, z_w = record._plant_batch(vehicle, plant, dt, q)
-        force = sw.dynamic_contact_force_N(vehicle, z_w, q, plant)
+        force = single_wheelset.dynamic_contact_force_N(vehicle, z_w, q, plant)
         force_error, _ = errors(observers["foh"], y, q, q_meas, z_w, force, window)
         lost = np.mean(force <= -vehicle.contacts * vehicle.static_wheel_load_N, axis=0)
         plant_rows += [{"speed_kmh": v, "plant": plant, "force_rms_N": _rms(force[window])[i],
@@ -160,8 +160,8 @@ def run(settings: Settings, *, progress=None,
     validate(settings)
     progress = progress or default_progress()
     started = time.perf_counter()
-    vehicle = sw.load_parameters(p0_basis=settings.p0_basis)
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters(p0_basis=settings.p0_basis)
+    A, B = single_wheelset.state_space(vehicle)
     observers = design_observers(A, B, settings)
     form = settings.observer_form
     other = "foh" if form == "paper" else "paper"
@@ -221,7 +221,7 @@ def run(settings: Settings, *, progress=None,
         f"convergence_time_s_{other}": runs[s].observer(other).convergence_time_s,
         f"force_rms_error_N_{other}": runs[s].observer(other).force_rms_error_N,
     } for s in settings.sweep_speeds_kmh])
-    observer = roo.design(A, B, 2, settings.observer_poles)
+    observer = reduced_order_observer.design(A, B, 2, settings.observer_poles)
     timings["run_s"] = time.perf_counter() - started
     return ReducedOrderObserverResult(
         metrics=metrics, timings=timings, timeseries=pd.DataFrame(columns),

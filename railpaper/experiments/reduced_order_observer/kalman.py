@@ -44,7 +44,7 @@ from scipy.linalg import solve_discrete_lyapunov
 from railpaper import stats, track
 from railpaper.estimators import kalman_baseline as kb
 from railpaper.estimators import kalman_smoother as ks
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments import track_shaping
 from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process
 from railpaper.experiments.reduced_order_observer import record, spec
@@ -53,7 +53,7 @@ from railpaper.experiments.reduced_order_observer.result import (
     KalmanComparison,
 )
 from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS, Settings
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 
 #: Sensor-noise levels (σ / channel RMS) of the comparison; the run's ``noise_fraction`` is added.
 NOISE_FRACTIONS = (1e-4, 1e-3, 1e-2, 3e-2)
@@ -161,7 +161,7 @@ def _simulate(vehicle, settings: Settings, speed, profiles) -> _Records:
     q = record.padded(np.column_stack(columns_q))                     # (K, S)
     y, z_w = record._plant_batch(vehicle, settings.plant, settings.dt_s, q)
     return _Records(list(profiles), t_s, q, y,
-                    sw.dynamic_contact_force_N(vehicle, z_w, q, settings.plant),
+                    single_wheelset.dynamic_contact_force_N(vehicle, z_w, q, settings.plant),
                     record.padded(np.stack(draws_y, axis=1)),
                     record.padded(np.column_stack(draws_q)))
 
@@ -189,9 +189,11 @@ def _speed_errors(vehicle, model, observer, settings: Settings, records: _Record
     meas[..., :2] = y[:, None] + records.draws_y[:, None] * sensor[..., None] * _rms(y)
     meas[..., 2] = q[:, None] + records.draws_q[:, None] * track_noise * _rms(q)
     x2_initial = np.stack([np.zeros(S), q[0] + settings.initial_error_m], axis=-1)   # (S, 2)
-    estimates = {"observer": sw.dynamic_contact_force_N(vehicle, record._observer_batch(
+    observed = record._observer_batch(
         observer, meas[..., :2].reshape(len(q), L * S, 2), meas[..., 2].reshape(len(q), L * S),
-        np.tile(x2_initial, (L, 1))).reshape(len(q), L, S), meas[..., 2])}
+        np.tile(x2_initial, (L, 1))).reshape(len(q), L, S)
+    estimates = {"observer": single_wheelset.dynamic_contact_force_N(vehicle, observed,
+                                                                     meas[..., 2])}
     R, P0 = filter_covariances(model, configs, settings)
     gains = ks.gains(model.F, model.Q, model.H, R, P0, len(t_s))        # one model per config
     x0 = np.concatenate([meas[0, ..., :2], np.broadcast_to(x2_initial, (L, S, 2)),
@@ -237,10 +239,11 @@ def error_column(estimator: str, sweep: str, level: float, speed_kmh: float) -> 
 
 def _estimator(settings: Settings):
     """The vehicle (reading ``p0_basis``), its (A, B) and the paper's discrete observer."""
-    vehicle = sw.load_parameters(p0_basis=settings.p0_basis)
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters(p0_basis=settings.p0_basis)
+    A, B = single_wheelset.state_space(vehicle)
     hold = "zoh" if settings.observer_form == "paper" else "foh"
-    observer = roo.design(A, B, 2, settings.observer_poles).discretise(settings.dt_s, hold)
+    observer = reduced_order_observer.design(A, B, 2, settings.observer_poles).discretise(
+        settings.dt_s, hold)
     return vehicle, A, B, observer
 
 

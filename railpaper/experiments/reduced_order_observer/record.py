@@ -20,7 +20,7 @@ from railpaper.experiments.reduced_order_observer.result import (
     SpeedRun,
 )
 from railpaper.experiments.reduced_order_observer.spec import FRA_BAND_M, Settings
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 from railpaper.settling import settling_time_s
 
 
@@ -30,7 +30,7 @@ def _simulate_hertz(vehicle, t_s, q_m, x0, substeps=4):
     x = np.empty((len(t_s), 4))
     x[0] = x0
     state = np.array(x0, float)
-    f = lambda s, q: sw.nonlinear_derivative(vehicle, s, q)  # noqa: E731
+    f = lambda s, q: single_wheelset.nonlinear_derivative(vehicle, s, q)  # noqa: E731
     for k in range(len(t_s) - 1):
         q0, q1 = q_m[k], q_m[k + 1]
         for j in range(substeps):
@@ -57,7 +57,7 @@ def simulate_record(vehicle, settings: Settings, distance_m, profile_m, speed_km
     t_s, q = track.wheelset_inputs(distance_m, profile_m, speed_kmh / 3.6, [0.0], dt, duration)
     q = q[:, 0]
     noise_y, noise_q = noise_draws(settings.seed, speed_kmh, len(t_s), salt)
-    A, B = sw.state_space(vehicle)
+    A, B = single_wheelset.state_space(vehicle)
     x0 = np.array([0.0, q[0], 0.0, q[0]])                 # static equilibrium on q(0)
     if settings.plant == "linear":
         x = simulate_foh(*foh(A, B, dt), q[:, None], x0)   # exact for q linear between samples
@@ -69,14 +69,16 @@ def simulate_record(vehicle, settings: Settings, distance_m, profile_m, speed_km
     return Record(speed_kmh=float(speed_kmh), t_s=t_s, q_m=q, x_true=x, y_measured=y,
                   q_measured_m=q_meas,
                   x2_initial=x[0, 2:] + np.array([0.0, settings.initial_error_m]),
-                  force_true_N=sw.dynamic_contact_force_N(vehicle, x[:, 3], q, settings.plant))
+                  force_true_N=single_wheelset.dynamic_contact_force_N(vehicle, x[:, 3], q,
+                                                                       settings.plant))
 
 
 def run_observer(observer, vehicle, record: Record, threshold_m: float,
                  window: np.ndarray) -> ObserverRun:
     """Run one discrete observer on a record; force from the linearised contact (Eq. 4)."""
     z_w_est = observer.run(record.y_measured, record.q_measured_m[:, None], record.x2_initial)[:, 1]
-    force_est = sw.dynamic_contact_force_N(vehicle, z_w_est, record.q_measured_m, "linear")
+    force_est = single_wheelset.dynamic_contact_force_N(vehicle, z_w_est, record.q_measured_m,
+                                                        "linear")
     error = z_w_est - record.x_true[:, 3]
     return ObserverRun(
         z_w_est_m=z_w_est, force_est_N=force_est,
@@ -153,7 +155,7 @@ def _plant_batch(vehicle, plant, dt_s, q):
     out = np.empty((len(q), q.shape[1], 3))
     out[0] = x[[0, 1, 3]].T
     if plant == "linear":
-        Phi, G0, G1 = foh(*sw.state_space(vehicle), dt_s)
+        Phi, G0, G1 = foh(*single_wheelset.state_space(vehicle), dt_s)
         ga, gb = (G0 - G1)[:, :1], G1[:, :1]
         for k in range(len(q) - 1):
             x = Phi @ x + ga * q[k] + gb * q[k + 1]

@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments.base import ChapterResult
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 
 
 @dataclass(frozen=True)
@@ -179,10 +179,10 @@ class ReducedOrderObserverResult(ChapterResult):
         without ``side_tables``.
     """
 
-    vehicle: sw.SingleWheelset | None = None
+    vehicle: single_wheelset.SingleWheelset | None = None
     A: np.ndarray | None = None
     B: np.ndarray | None = None
-    observer: roo.ReducedOrderObserver | None = None
+    observer: reduced_order_observer.ReducedOrderObserver | None = None
     error_poles_per_s: np.ndarray | None = None
     runs: dict = field(default_factory=dict)
     speed_sweep: pd.DataFrame = field(default_factory=pd.DataFrame)

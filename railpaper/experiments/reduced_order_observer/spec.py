@@ -5,7 +5,7 @@ the sensitivity table."""
 from __future__ import annotations
 
 from railpaper.experiments.base import ChapterSpec, Parameter
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 
 SPEC = ChapterSpec(
     name="reduced-order-observer",
@@ -68,7 +68,7 @@ NOISE_SWEEP_FRACTIONS = (0.0, 1e-5, 1e-4, 1e-3, 1e-2)
 
 
 #: Readings of the paper's P0 (Eq. 3), default (the chapter's) first; see ``single_wheelset``.
-READINGS = sw.P0_BASES
+READINGS = single_wheelset.P0_BASES
 
 
 #: Shortest and longest wavelengths of the FRA spectrum's validity range, m.

@@ -14,10 +14,10 @@ from railpaper.data import data_path, load_quantities
 from railpaper.experiments.display import markdown, number, seconds  # noqa: F401 - re-exported
 from railpaper.experiments.reduced_order_observer import spec
 from railpaper.experiments.reduced_order_observer.spec import ESTIMATORS, Settings
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 
 
-def parameter_table(vehicle_readings: dict[str, sw.SingleWheelset]) -> str:
+def parameter_table(vehicle_readings: dict[str, single_wheelset.SingleWheelset]) -> str:
     """Table 1's parameters with units and sources, and the derived contact quantities of each
     reading of P0 (``{reading: vehicle}``)."""
     quantities = load_quantities(data_path("reduced-order-observer/parameters.toml"))

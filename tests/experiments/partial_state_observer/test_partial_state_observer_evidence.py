@@ -15,7 +15,7 @@ from railpaper.estimators import kalman_baseline as kb
 from railpaper.experiments.partial_state_observer import evidence as ev
 from railpaper.experiments.partial_state_observer import records
 from railpaper.experiments.partial_state_observer.spec import SPEC
-from railpaper.models import vertical_10dof as v10
+from railpaper.models import vertical_10dof
 from railpaper.settling import settling_time_s
 
 
@@ -174,7 +174,7 @@ def test_batched_simulators_match_single_runs():
 def test_hb0_poles_at_primary_corner_in_both_readings(reading):
     settings = SPEC.resolve({}, quick=True)
     ctx = records.Context(settings, reading)
-    v = v10.load_parameters(**records.suspension(reading))
+    v = vertical_10dof.load_parameters(**records.suspension(reading))
     np.testing.assert_allclose(ctx.hb0.poles.real,
                                -v.primary_stiffness_N_per_m / v.primary_damping_Ns_per_m, rtol=1e-5)
 
@@ -184,7 +184,7 @@ def test_wheelset_rms_equals_python_control_response_integrated_by_quad():
     from python-control's frequency response with the axle delays, integrated against the track
     PSD by scipy's adaptive quad, against the log-grid trapezoid of evidence.wheelset_rms; and
     the deflection ratio of the two wheelsets of the first bogie, which the claim reads."""
-    model = v10.build_model(v10.load_parameters())
+    model = vertical_10dof.build_model(vertical_10dof.load_parameters())
     band, speed = (1.524, 304.8), 80 / 3.6
     system = control.ss(model.A, model.B, model.L, np.zeros((4, 4)))
     offsets = np.asarray(model.parameters.axle_offsets_m)

@@ -9,10 +9,10 @@ import pytest
 from conftest import railpaper_cli
 from scipy.linalg import expm
 
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer.spec import SPEC
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 from railpaper.pipeline.check import check_chapter
 from railpaper.settling import settling_time_s
 
@@ -67,8 +67,8 @@ def test_convergence_time_matches_error_dynamics(quick_chapter_dir):
     metrics = json.loads((out / "metrics.json").read_text())
     settings = SPEC.resolve(metrics["parameters"], quick=True)
     ts = pd.read_csv(out / "timeseries.csv")
-    A, B = sw.state_space(sw.load_parameters())
-    F = roo.design(A, B, 2, settings.observer_poles).F
+    A, B = single_wheelset.state_space(single_wheelset.load_parameters())
+    F = reduced_order_observer.design(A, B, 2, settings.observer_poles).F
     t = ts.t_s.to_numpy()
     e = np.array([expm(F * tk) @ [0.0, settings.initial_error_m] for tk in t[::10]])[:, 1]
     for lab in ("60kmh", "100kmh"):

@@ -11,12 +11,12 @@ from scipy import stats as st
 
 from railpaper import track
 from railpaper.discretise import foh, simulate_foh
-from railpaper.estimators import reduced_order_observer as roo
+from railpaper.estimators import reduced_order_observer
 from railpaper.experiments.reduced_order_observer import evidence as ev
 from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import record
 from railpaper.experiments.reduced_order_observer.spec import READINGS, SPEC
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 from railpaper.settling import settled_index
 
 SMALL = {"speeds_kmh": [60.0, 100.0], "sweep_speeds_kmh": [40.0, 100.0, 160.0], "duration_s": 0.6,
@@ -72,21 +72,22 @@ def test_structure_metrics():
 
 
 def test_pole_error_sees_a_wrong_placement(monkeypatch):
-    A, B = sw.state_space(sw.load_parameters())
+    A, B = single_wheelset.state_space(single_wheelset.load_parameters())
     assert ev._pole_error(A, B, [-30.0, -40.0]) < 1e-9
-    real_design = roo.design
-    monkeypatch.setattr(roo, "design", lambda A, B, n1, poles: real_design(A, B, n1, [-30.0, -41.0]))
+    real_design = reduced_order_observer.design
+    monkeypatch.setattr(reduced_order_observer, "design",
+                        lambda A, B, n1, poles: real_design(A, B, n1, [-30.0, -41.0]))
     assert ev._pole_error(A, B, [-30.0, -40.0]) == pytest.approx(1 / 40, rel=1e-6)
 
 
 @pytest.mark.parametrize("reading", ev.READINGS)
 def test_batched_plant_and_observer_equal_single_runs(reading):
-    vehicle = sw.load_parameters(p0_basis=reading)
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters(p0_basis=reading)
+    A, B = single_wheelset.state_space(vehicle)
     dt, t = 1e-4, np.arange(0, 0.2, 1e-4)
     q = np.column_stack([1e-3 * np.sin(2 * np.pi * f * t) + c for f, c in ((3, 0), (17, 2e-4))])
     y, z_w = record._plant_batch(vehicle, "linear", dt, q)
-    obs = roo.design(A, B, 2, [-30.0, -40.0]).discretise(dt, "zoh")
+    obs = reduced_order_observer.design(A, B, 2, [-30.0, -40.0]).discretise(dt, "zoh")
     x2_initial = np.column_stack([np.zeros(2), q[0] + 5e-3])
     z_est = record._observer_batch(obs, y, q, x2_initial)
     for j in range(2):

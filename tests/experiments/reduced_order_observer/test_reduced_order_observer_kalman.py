@@ -14,7 +14,7 @@ from railpaper.experiments.reduced_order_observer import experiment as chapter
 from railpaper.experiments.reduced_order_observer import kalman as rk
 from railpaper.experiments.reduced_order_observer import record as simulation
 from railpaper.experiments.reduced_order_observer.spec import SPEC
-from railpaper.models import single_wheelset as sw
+from railpaper.models import single_wheelset
 
 
 @pytest.fixture(scope="module")
@@ -108,8 +108,8 @@ def small():
 
 
 def test_model_is_exact_discretisation():
-    vehicle = sw.load_parameters()
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters()
+    A, B = single_wheelset.state_space(vehicle)
     shaping = rk.shaping_filter(5, 60 / 3.6)
     model = rk.kalman_model(A, B, shaping, 1e-4)
     Aa, Ga, _ = kb.augment(A, B, np.eye(4)[:2], [shaping])
@@ -125,8 +125,8 @@ def test_chapter_record_against_filterpy(small):
     """The comparison's Kalman filter and smoother on seed `seed` at 60 km/h (the run's noise),
     rebuilt with filterpy from the record and the filter's documented assumptions."""
     settings, comparison = small
-    vehicle = sw.load_parameters()
-    A, B = sw.state_space(vehicle)
+    vehicle = single_wheelset.load_parameters()
+    A, B = single_wheelset.state_space(vehicle)
     model = rk.kalman_model(A, B, comparison.shaping[60.0], settings.dt_s)
     R, P0 = rk.filter_covariances(model, [(settings.noise_fraction, 0.0)], settings)
     distance, profile = simulation.profile(settings, settings.seed)
@@ -200,7 +200,7 @@ def test_smoother_beats_filter_on_records_of_its_own_model(speed_kmh):
     filtered indices would break this.  (On the chapter's synthesised track the smoother loses
     a little: there the shaping filter is a fit, not the track's model.)"""
     settings = SPEC.resolve({}, quick=True)
-    A, B = sw.state_space(sw.load_parameters())
+    A, B = single_wheelset.state_space(single_wheelset.load_parameters())
     model = rk.kalman_model(A, B, rk.shaping_filter(settings.track_class, speed_kmh / 3.6),
                             settings.dt_s)
     R, P0 = rk.filter_covariances(model, [(settings.noise_fraction, 0.0)], settings)
