@@ -25,9 +25,8 @@ from railpaper.experiments.records import map_in_process
 from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.decisive import chapter_studies
 
-#: Studies whose first record compiles the most (seconds on this machine's fresh cache: 003's
-#: paper scheme 20, its toy 10, the rest 5 or less); they start first so that the processes
-#: finish together.
+#: The studies whose first record compiles the most (chapter 003's paper-scheme RBPF and its toy,
+#: each several times any other): they start first so that the processes finish together.
 FIRST = (("rbpf-parameter-estimation", "lateral_paper_scheme"),
          ("rbpf-parameter-estimation", "toy"))
 
