@@ -227,6 +227,66 @@ def change_posterior(lik: ChangeLikelihoods, p_no_change: float = 0.5,
                            tau_steps=lik.tau_steps.copy())
 
 
+@dataclass(frozen=True)
+class ChangeStatistics:
+    """The classical on-line statistics of one change from a known regime, from
+    :func:`change_statistics`.
+
+    Attributes
+    ----------
+    log_shiryaev_roberts : ndarray, (K,)
+        log R_k of the mixture Shiryaev–Roberts statistic after every step k (−inf while no
+        hypothesis has started).
+    glr : ndarray, (K,)
+        The window-limited generalised likelihood ratio g_k (natural log; −inf while no
+        hypothesis has started).
+    window_steps : int or None
+        W: only changes at the last W steps (τ_j > k − W) enter; None for every change so far.
+    """
+
+    log_shiryaev_roberts: np.ndarray
+    glr: np.ndarray
+    window_steps: int | None
+
+
+def change_statistics(lik: ChangeLikelihoods, window_steps: int | None = None,
+                      prior: np.ndarray | None = None) -> ChangeStatistics:
+    """The mixture Shiryaev–Roberts statistic and the window-limited GLR of a change from the
+    known regime θ₀ to one of the candidate values, from exact Kalman likelihoods.
+
+    With the log-likelihood ratio of hypothesis (v, τ_j) against no change after step k,
+    ``λ_vj(k) = ℓ_vj(k) − ℓ₀(k) = Σ_{i=τ_j..k} log Λ_i(v, τ_j)`` (zero before the change)::
+
+        R_k = Σ_{j: k−W < τ_j ≤ k} Σ_v π_v e^{λ_vj(k)}        (Shiryaev–Roberts, mixed over v)
+        g_k = max_{j: k−W < τ_j ≤ k} max_v λ_vj(k)             (GLR; Willsky & Jones, Lai 1998)
+
+    One change from a known regime, so no reset or run-length model; every grid step is a
+    possible change time with weight one (R_k is not a posterior).  ``prior`` (V,) weighs the
+    values (uniform by default, normalised to 1).  Window-limiting drops the terms of changes
+    more than W steps back; for R_k that is a sum of non-negative terms, so the windowed
+    statistic never exceeds the full one, and equals it while k ≤ W.
+    """
+    V, J, K = lik.changed.shape
+    if window_steps is not None and window_steps < 1:
+        raise ValueError(f"window_steps must be >= 1 or None, got {window_steps}")
+    w = np.full(V, 1.0 / V) if prior is None else np.asarray(prior, float)
+    if w.shape != (V,) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"prior must be non-negative weights of shape {(V,)}")
+    with np.errstate(divide="ignore"):
+        log_w = np.log(w / w.sum())
+    steps = np.arange(1, K + 1)
+    tau = lik.tau_steps[:, None]
+    inside = tau <= steps[None, :]                                           # (J, K)
+    if window_steps is not None:
+        inside &= tau > steps[None, :] - window_steps
+    ratio = lik.changed - lik.no_change[None, None, :]                       # λ_vj(k)
+    live = np.broadcast_to(inside[None], ratio.shape)
+    log_terms = np.where(live, log_w[:, None, None] + ratio, -np.inf)
+    log_sr = _logsumexp(log_terms.reshape(V * J, K))
+    glr = np.where(live, ratio, -np.inf).reshape(V * J, K).max(axis=0)
+    return ChangeStatistics(log_shiryaev_roberts=log_sr, glr=glr, window_steps=window_steps)
+
+
 def _logsumexp(a: np.ndarray) -> np.ndarray:
     """log Σ_i exp(a[i, k]) over the first axis (−inf where every term is −inf)."""
     top = np.max(a, axis=0)

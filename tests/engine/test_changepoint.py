@@ -2,6 +2,8 @@
 one filter at a time with its own time-varying matrices (a textbook Kalman loop written here),
 and the posterior by direct enumeration."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -88,3 +90,86 @@ def test_bad_grids_are_refused():
                              u=u)
     with pytest.raises(ValueError, match="p_no_change"):
         change_posterior(lik, p_no_change=1.0)
+
+
+# ---- the on-line statistics: mixture Shiryaev-Roberts and window-limited GLR ------------------
+
+def _random_likelihoods(seed=0, V=3, J=5, K=12):
+    """Cumulative log-likelihoods that obey the definition: equal to no-change before τ_j, then
+    no-change plus a random log-likelihood ratio accumulated from τ_j on."""
+    from railpaper.engine import ChangeLikelihoods
+    rng = np.random.default_rng(seed)
+    no_change = np.cumsum(rng.normal(-1.0, 0.3, K))
+    tau = np.sort(rng.choice(np.arange(1, K + 1), J, replace=False))
+    steps = np.arange(1, K + 1)
+    changed = np.empty((V, J, K))
+    for v in range(V):
+        for j, t in enumerate(tau):
+            gain = np.cumsum(np.where(steps >= t, rng.normal(0.2, 0.5, K), 0.0))
+            changed[v, j] = no_change + gain
+    return ChangeLikelihoods(no_change, changed, tau, np.zeros((V, 1)), 0)
+
+
+@pytest.mark.parametrize("window", [None, 1, 3, 7, 100])
+def test_shiryaev_roberts_and_glr_equal_their_brute_force_sums(window):
+    from railpaper.engine import change_statistics
+    lik = _random_likelihoods()
+    V, J, K = lik.changed.shape
+    prior = np.array([0.5, 0.3, 0.2])
+    stats = change_statistics(lik, window, prior)
+    for k in range(1, K + 1):
+        terms, ratios = [], []
+        for j, t in enumerate(lik.tau_steps):
+            if t <= k and (window is None or t > k - window):
+                for v in range(V):
+                    ratio = lik.changed[v, j, k - 1] - lik.no_change[k - 1]
+                    terms.append(prior[v] * math.exp(ratio))
+                    ratios.append(ratio)
+        if terms:
+            assert stats.log_shiryaev_roberts[k - 1] == pytest.approx(math.log(sum(terms)),
+                                                                     rel=1e-12)
+            assert stats.glr[k - 1] == max(ratios)
+        else:
+            assert stats.log_shiryaev_roberts[k - 1] == -math.inf and stats.glr[k - 1] == -math.inf
+
+
+def test_the_window_only_drops_old_changes():
+    """Windowed R_k <= full R_k at every step, equal while k <= W; W >= K is the full statistic;
+    the GLR likewise (a maximum over fewer hypotheses)."""
+    from railpaper.engine import change_statistics
+    lik = _random_likelihoods(seed=4, K=20)
+    full = change_statistics(lik)
+    for window in (2, 5, 9):
+        part = change_statistics(lik, window)
+        assert np.all(part.log_shiryaev_roberts <= full.log_shiryaev_roberts + 1e-12)
+        assert np.all(part.glr <= full.glr)
+        np.testing.assert_array_equal(part.log_shiryaev_roberts[:window],
+                                      full.log_shiryaev_roberts[:window])
+    np.testing.assert_array_equal(change_statistics(lik, 20).glr, full.glr)
+    with pytest.raises(ValueError, match="window_steps"):
+        change_statistics(lik, 0)
+
+
+def test_statistics_rise_after_a_real_change_of_an_ar1():
+    """The module's AR(1) example (0.9 -> -0.5 at step 60): before the change both statistics
+    stay low; inside the window after it the GLR passes 10 (nats) and R_k grows by more than
+    e^5."""
+    from railpaper.engine import change_likelihoods, change_statistics
+    from railpaper.engine.linear_gaussian import LinearGaussianBatch
+
+    def system(theta):
+        a = np.atleast_2d(theta)[:, 0]
+        return LinearGaussianBatch(a[:, None, None], [[1.0]], [[1.0]], [[0.1]])
+    rng = np.random.default_rng(3)
+    x, y = 0.0, []
+    for k in range(1, 121):
+        x = (0.9 if k < 60 else -0.5) * x + rng.standard_normal()
+        y.append(x + np.sqrt(0.1) * rng.standard_normal())
+    lik = change_likelihoods(system, np.array(y)[:, None], [0.9], [[-0.5], [0.0]],
+                             np.arange(2, 121), np.zeros(1), np.eye(1))
+    stats = change_statistics(lik, window_steps=30)
+    before, after = slice(0, 55), slice(62, 89)         # steps 1-55; 63-89, inside the window
+    assert stats.glr[before].max() < 5.0 < 10.0 < stats.glr[after].min()
+    assert stats.log_shiryaev_roberts[after].min() - stats.log_shiryaev_roberts[before].max() > 5
+    # 60 steps after the change it has left the 30-step window; the full statistic keeps it
+    assert stats.glr[-1] < change_statistics(lik).glr[-1]
