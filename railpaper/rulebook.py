@@ -302,12 +302,14 @@ def departure(deviations: Sequence[float] | None = None, margin: float = 0.1,
 def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold: float = 0.5,
               level: float = 0.95) -> Decision:
     """A verdict read off an estimator's output, checked against that estimator's soundness
-    on the same records: ``sound`` of ``n`` records where it ends within two of its own
-    posterior standard deviations of the truth.  A *reproduced* becomes an *artefact* when the
-    Clopper–Pearson interval of ``sound / n`` lies wholly below ``threshold``: the claimed
-    number (a convergence step, an error, a gain) comes from a filter whose uncertainty excludes
-    the truth on most records.  Every other verdict, and a sound estimator's, is returned as it
-    is.
+    on the same records: ``sound`` of ``n`` records where its final estimate lies within two
+    standard deviations of the *exact* posterior of the record from that posterior's mean, for
+    every parameter (it computes, up to its noise, the answer it is meant to approximate).  A
+    *reproduced* becomes an *artefact* when the Clopper–Pearson interval of ``sound / n`` lies
+    wholly below ``threshold``: the claimed number (a convergence step, an error, a gain) comes
+    from a filter that misses the exact posterior on most records.  Every other verdict, and a
+    sound estimator's, is returned as it is.  Only studies that compute the exact posterior
+    per record carry the columns this reads (chapter 004's).
 
     >>> soundness(Decision("reproduced", "settles at step 4"), "qgrbpf", 8, 150).verdict
     'artefact'
@@ -320,9 +322,10 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
     if high >= threshold:
         return decision
     return dataclasses.replace(decision, verdict="artefact", reason=(
-        f"{decision.reason}; but the {estimator} ends within two of its own posterior standard "
-        f"deviations of the truth on only {sound}/{n} of these records [{low:.3g}, {high:.3g}], "
-        f"wholly below {threshold:g}: the number comes from a filter that is wrong about itself"))
+        f"{decision.reason}; but the {estimator} ends within two exact-posterior standard "
+        f"deviations of the exact posterior mean on only {sound}/{n} of these records "
+        f"[{low:.3g}, {high:.3g}], wholly below {threshold:g}: the number comes from a filter "
+        "that misses the posterior it approximates"))
 
 
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:

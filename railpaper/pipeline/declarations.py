@@ -434,14 +434,17 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
         return rulebook.single_run(rows[list(d.metrics)].to_numpy(dtype=float), d.paper_value,
                                    resolution, policy["alpha_single_run"], level)
     if d.procedure == "population-rate":
-        hits = rows[d.metrics[0]].astype(bool)
+        column = rows[d.metrics[0]]
+        hits = column.astype(bool)
+        if version >= 2:                   # no answer (a diverged filter) is not a success
+            hits &= column.notna()
         return rulebook.population_rate(int(hits.sum()), len(hits), entry["threshold"],
                                         entry.get("direction", "at least"), level)
     if d.procedure == "paired-change":
         baseline_mean = float(np.mean(rows[d.metrics[0]].to_numpy(float)))
         if baseline_mean == 0.0 and version >= 2:
-            return Decision("undecided", f"the baseline {d.metrics[0]!r} is 0 on every record: "
-                            "a change relative to it is undefined", n=len(rows))
+            return Decision("undecided", f"the baseline {d.metrics[0]!r} has mean 0: a change "
+                            "relative to it is undefined", n=len(rows))
         return rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
                                       rows[d.metrics[1]].to_numpy(float), d.direction,
                                       entry["margin"], level)

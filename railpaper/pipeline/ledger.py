@@ -653,11 +653,12 @@ def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None)
     lines = [f"{headline(rows)} ({len(rows)} rows with the readings). " + "".join(older)
              + f"Of the {declared} rows ever declared under the rulebook, {revisions(registry)} "
              "had their declaration revised or were dropped since their first registration; "
-             f"{procedure_reregistrations(registry)} were registered again, unchanged, under "
-             f"version {Vocabulary.load().policy['procedure_version']} of the decision "
-             f"procedures, and {len(moved)} rows of this run read otherwise than under the "
-             "registration before (each shown beside its earlier verdict; "
-             "data/claims_registry.json keeps every earlier declaration).", ""]
+             f"{procedure_reregistrations(registry)} were registered again with the same "
+             f"declaration under version {Vocabulary.load().policy['procedure_version']} of the "
+             "decision procedures, which was written after the evidence had been seen. "
+             f"{len(moved)} rows of this run read otherwise than under their registration "
+             "before: each is a revision after the evidence, shown beside its earlier verdict "
+             "(data/claims_registry.json keeps every earlier declaration).", ""]
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
         link = f"{{ref}}`{_cell(titles.get(chapter, chapter))} <{claims_label(chapter)}>`"
@@ -696,8 +697,12 @@ def central_claims(rows: list[LedgerRow]) -> str:
         if not is_central(head):
             continue
         claim = head.claim.rstrip(". ")
+        changed = ""
+        if head.revised and head.original_verdict and head.original_verdict != head.verdict:
+            changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
+                       "came after the evidence had been seen.")
         lines.append(f"- The paper's claim that {claim} {VERDICT_SENTENCES[head.verdict]} "
-                     f"({verdict_badge(head.verdict)}).")
+                     f"({verdict_badge(head.verdict)}).{changed}")
     return "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"
 
 

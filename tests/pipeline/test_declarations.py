@@ -269,3 +269,10 @@ def test_a_change_from_a_baseline_that_never_happens_is_undecided_under_version_
     assert decision.verdict == "undecided" and "undefined" in decision.reason
     with pytest.raises(ValueError, match="baseline's mean is 0"):
         decide(declaration(), VOCABULARY, rows, {}, procedure_version=1)
+
+
+def test_a_rate_counts_a_record_without_an_answer_as_no_under_version_2():
+    rows = pd.DataFrame({"converged": [1.0] * 38 + [np.nan] * 2})
+    rate = declaration(word_class="absolute", metrics=["converged"], direction="")
+    assert decide(rate, VOCABULARY, rows, {}, procedure_version=1).statistic == 1.0
+    assert decide(rate, VOCABULARY, rows, {}).statistic == 38 / 40
