@@ -18,8 +18,8 @@ threshold of a claim's own.
   :func:`departure` — a claimed offset ('biased'), its mirror;
 * :func:`deterministic`, :func:`design`, :func:`implementation` — exact values, stated checks
   and rates; :func:`cost_ratio` — a time ratio or share measured on this machine;
-* :func:`soundness` (procedure version 2) — a *reproduced* read off an estimator that is wrong
-  about itself on most of the same records is an *artefact*.
+* :func:`soundness` (procedure version 2) — a *reproduced* read off an estimator that misses
+  the exact posterior on most of the same records is an *artefact*.
 
 Sample sizes come from power, before the deciding run (:func:`rate_size`,
 :func:`continuous_size`, :func:`single_run_size`).

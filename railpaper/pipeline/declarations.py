@@ -322,8 +322,9 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     ``procedure_version`` (the vocabulary's by default) selects the procedures a row was
     registered under, so that an earlier verdict can be shown beside today's.  Version 2 adds
     the estimator's soundness (:func:`railpaper.rulebook.soundness`), counts a per-record NaN
-    as never happened, reads design rows as yes/no checks only, and makes a paired change from
-    a baseline that is 0 on every record undecided (version 1 raised)."""
+    as never happened in a paired change, equivalence or departure and as "no" in a rate, reads
+    design rows as yes/no checks only, and makes a paired change from a baseline of mean 0
+    undecided (version 1 raised)."""
     d, policy = declaration, vocabulary.policy
     version = policy["procedure_version"] if procedure_version is None else procedure_version
     entry = vocabulary.entry(d.word_class)
