@@ -325,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_evidence)
 
     p = sub.add_parser("compile", help="compile the numba kernels into their on-disk cache once "
-                       "(make venv does this): one record of every study")
+                       "(make test does this): one record of every study")
     p.add_argument("--jobs", type=int, default=2, help="processes (default 2)")
     p.add_argument("--verbose", action="store_true", help="one line per study compiled")
     p.set_defaults(func=cmd_compile)

@@ -3,12 +3,12 @@
 The engine's kernels are ``numba.njit(cache=True)``: the first process that calls one compiles
 it for the argument types it sees and writes the machine code beside the source
 (``__pycache__/*.nbi``, ``*.nbc``); every later process loads it.  On a fresh checkout nothing
-is cached, and the processes of a test session or a book build — two test workers, the quick
-book's chapter kernels, dask workers — start together and each compile the same kernels.
+is cached, and the processes of a test session — two test workers, the quick book's chapter
+kernels, dask workers — start together and each compile the same kernels.
 :func:`compile_kernels` does that work once, before them: one record of every chapter's every
 per-record study at its quick settings, the studies spread over a few processes, largest
-first.  The records computed are thrown away; only the cache stays.  ``make venv`` runs it
-(``railpaper compile``).
+first.  The records computed are thrown away; only the cache stays.  ``make test`` runs it
+(``railpaper compile``) when the package's source has changed since it last did.
 
 >>> [task[0] for task in kernel_tasks(["partial-state-observer"])][:1]
 ['partial-state-observer']
