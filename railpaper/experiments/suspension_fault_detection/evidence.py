@@ -143,10 +143,7 @@ def fault_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
     m = {}
     delay = outcomes["delay_s"].to_numpy()
     for d in WITHIN_S:
-        est = rate(delay <= d + 1e-9)
-        key = f"detected_within_{d:g}s_{tag}"
-        m.update({key: est.value, f"{key}_low": est.low, f"{key}_high": est.high,
-                  f"{key}_n": est.n})
+        m.update(rate(delay <= d + 1e-9).metrics(f"detected_within_{d:g}s_{tag}"))
     early = rate(outcomes["early"].to_numpy())
     m.update({f"alarm_before_fault_{tag}": early.value, f"alarm_before_fault_{tag}_low": early.low,
               f"alarm_before_fault_{tag}_high": early.high})
@@ -190,16 +187,12 @@ def estimate_metrics(runs: list[RecordRun], detector: str, tag: str) -> dict:
                        if detector in r.post_fault_estimate])
     if errors.size < 2:
         return {}
-    est = median_interval(errors)
-    key = f"post_fault_error_{tag}"
-    return {key: est.value, f"{key}_low": est.low, f"{key}_high": est.high, f"{key}_n": est.n}
+    return median_interval(errors).metrics(f"post_fault_error_{tag}")
 
 
 def flange_metrics(runs: list[RecordRun], tag: str) -> dict:
     """How often a fault's records reach flange contact, and how soon after the fault."""
-    hit = rate([r.flange_contact for r in runs])
-    m = {f"flange_contact_rate_{tag}": hit.value, f"flange_contact_rate_{tag}_low": hit.low,
-         f"flange_contact_rate_{tag}_high": hit.high, f"flange_contact_rate_{tag}_n": hit.n}
+    m = rate([r.flange_contact for r in runs]).metrics(f"flange_contact_rate_{tag}")
     times = np.array([r.end_s - r.fault_time_s if r.flange_contact else np.inf for r in runs])
     med, low, high = censored_median(times)
     m.update({f"flange_contact_after_s_{tag}": med, f"flange_contact_after_s_{tag}_low": low,
@@ -212,10 +205,9 @@ def fault_free_flange_metrics(runs: list[RecordRun], tag: str) -> dict:
     (``flange_contact_rate_fault_free_<speed>`` with its interval, and the count): the running
     every fault's rate is read against, and records whose detectors watch less than the window
     because they end there."""
-    hit = rate([r.flange_contact for r in runs])
-    key = f"flange_contact_rate_fault_free_{tag}"
-    return {key: hit.value, f"{key}_low": hit.low, f"{key}_high": hit.high, f"{key}_n": hit.n,
-            f"flange_contacts_fault_free_{tag}": int(sum(r.flange_contact for r in runs))}
+    m = rate([r.flange_contact for r in runs]).metrics(f"flange_contact_rate_fault_free_{tag}")
+    m[f"flange_contacts_fault_free_{tag}"] = int(sum(r.flange_contact for r in runs))
+    return m
 
 
 def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
