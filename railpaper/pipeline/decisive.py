@@ -154,8 +154,8 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
             map_in_process(study, settings, probe)
             rate_s = (time.process_time() - started) / len(probe)
         rates[(item.chapter, item.study)] = rate_s
-    chosen = allocate_sizes({key: (rates[key], item.sizes or (item.size,))
-                             for key, item in zip([(i.chapter, i.study) for i in items], items)},
+    chosen = allocate_sizes({(i.chapter, i.study): (rates[(i.chapter, i.study)],
+                                                    i.sizes or (i.size,)) for i in items},
                             budget_s)
     done = []
     for item in items:
