@@ -88,6 +88,21 @@ def test_single_run_judges_the_numbers_jointly():
         single_run(first[:, None], [1.0, 2.0], [0.0, 0.0])
 
 
+def test_single_run_on_a_yes_no_number_says_it_asks_only_whether_it_happens():
+    # 31 of 100 records show the paper's outcome (1): T = 2 (1 − 0.845) = 0.31 for them and
+    # 0.69 for the rest, so 31 records are as extreme: p = 32 / 101, a plausible draw, and the
+    # reason gives the share 0.31 and points to a rate row.
+    records = np.array([[1.0]] * 31 + [[0.0]] * 69)
+    decision = single_run(records, [1.0], [0.0])
+    assert decision.verdict == "reproduced"
+    assert decision.statistic == pytest.approx(32 / 101)
+    assert "here 0.31, not how often" in decision.reason
+    # 2 of 100: the interval of 2/100 straddles α; 0 of 100: differs
+    assert single_run(np.array([[1.0]] * 2 + [[0.0]] * 98), [1.0], [0.0]).verdict == "undecided"
+    assert single_run(np.zeros((100, 1)), [1.0], [0.0]).verdict == "differs"
+    assert "yes/no" not in single_run(np.arange(100.0)[:, None], [50.0], [0.0]).reason
+
+
 def test_population_rate_boundaries():
     # lower bound of 72/72 = 0.025^(1/72) = 0.95006 > 0.95; of 71/71 = 0.94937
     assert population_rate(72, 72, 0.95).verdict == "reproduced"
