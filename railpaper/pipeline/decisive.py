@@ -41,6 +41,7 @@ from railpaper.pipeline.declarations import (
     write_registry,
 )
 from railpaper.pipeline.evidence_store import EvidenceStore, current_commit, stored_map
+from railpaper.pipeline.soundness import estimator_catalogue, posterior_study, with_soundness
 from railpaper.rulebook import Vocabulary, relative_change_sd
 from railpaper.timing import machine
 
@@ -126,6 +127,10 @@ def plan(chapters: list[str]) -> list[StudyPlan]:
             size = registry.get(d.key, {}).get("size")
             if d.study and size:
                 sizes.setdefault(d.study, set()).add(int(size))
+        for study in list(sizes):          # the exact posterior of its records, same sizes
+            posterior = posterior_study(chapter, study)
+            if posterior is not None:
+                sizes.setdefault(posterior.name, set()).update(sizes[study])
         studies = chapter_studies(chapter) if sizes else {}
         plans += [StudyPlan(chapter, study, max(wanted), studies[study].first(settings),
                             sizes=tuple(sorted(wanted)))
@@ -229,8 +234,17 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
         rows = tables[d.study]
         if len(rows) < size:
             continue
-        decision = decide(d, vocabulary, first_records(rows.drop(columns="commit"), size), {},
-                          size)
+        rows = first_records(rows.drop(columns="commit"), size)
+        posterior = posterior_study(chapter, d.study)
+        if posterior is not None:                     # its filters' soundness (version 3)
+            if posterior.name not in tables:
+                tables[posterior.name] = store.read(posterior, settings)
+            known = tables[posterior.name]
+            rows = with_soundness(chapter, d.study, rows,
+                                  first_records(known.drop(columns="commit", errors="ignore"),
+                                                size) if len(known) else None, settings)
+        decision = decide(d, vocabulary, rows, {}, size,
+                          estimator_of=estimator_catalogue(chapter, d.study))
         out[d.id] = {"verdict": decision.verdict, "statistic": decision.statistic,
                      "low": decision.low, "high": decision.high, "n": decision.n}
     return out

@@ -39,7 +39,7 @@ import json
 import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -313,7 +313,8 @@ def first_records(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame |
 
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
            metrics: dict[str, Any], size: int | None = None,
-           procedure_version: int | None = None) -> Decision:
+           procedure_version: int | None = None,
+           estimator_of: Callable[[str], str | None] | None = None) -> Decision:
     """The row's verdict by its class's procedure: from the per-record ``rows`` of its study
     (single-run, rates, changes, equivalences) or the run's ``metrics`` (deterministic, design,
     implementation).  A sampled row with fewer records than its registered ``size`` is
@@ -324,7 +325,10 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     the estimator's soundness (:func:`railpaper.rulebook.soundness`), counts a per-record NaN
     as never happened in a paired change, equivalence or departure and as "no" in a rate, reads
     design rows as yes/no checks only, and makes a paired change from a baseline of mean 0
-    undecided (version 1 raised)."""
+    undecided (version 1 raised).  Version 3 checks only the estimators a row credits
+    (:func:`estimators_credited`), names them from the study's catalogue ``estimator_of``
+    (column → estimator, where the chapter gives one) and counts soundness on the records
+    whose exact posterior is known."""
     d, policy = declaration, vocabulary.policy
     version = policy["procedure_version"] if procedure_version is None else procedure_version
     entry = vocabulary.entry(d.word_class)
@@ -368,7 +372,8 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     if decision is not None:
         if left_out:
             decision = dataclasses.replace(decision, reason=decision.reason + left_out)
-        return _sound(d, decision, rows, policy) if version >= 2 else decision
+        return _sound(d, decision, rows, policy, version, estimator_of) if version >= 2 \
+            else decision
     values = [metrics.get(m) for m in d.metrics]
     if d.procedure == "implementation":
         if d.paper_rate_hz is not None or not d.direction:
@@ -400,28 +405,94 @@ def _is_yes_no(value: Any) -> bool:
         isinstance(value, (int, float, np.integer, np.floating)) and float(value) in (0.0, 1.0))
 
 
+def _suffix_estimator(metric: str, estimators: Sequence[str], prefix: str) -> str | None:
+    """Version 2's reading of a metric's estimator: the longest ``<m>`` with a soundness column
+    such that the metric is that column or ends in ``_<m>``."""
+    matching = [m for m in estimators if metric == prefix + m or metric.endswith("_" + m)]
+    return max(matching, key=len) if matching else None
+
+
 def estimators_read(d: Declaration, columns: Sequence[str], prefix: str) -> list[str]:
-    """The estimators whose output a row reads: for each metric, the longest ``<m>`` with a
-    soundness column ``<prefix><m>`` among ``columns`` such that the metric is that column or
-    ends in ``_<m>`` (``settling_step_a_qgrbpf_printed`` reads ``qgrbpf_printed``, not
-    ``rbpf``)."""
+    """The estimators whose output a row reads (version 2): for each metric, the longest
+    ``<m>`` with a soundness column ``<prefix><m>`` among ``columns`` such that the metric is
+    that column or ends in ``_<m>`` (``settling_step_a_qgrbpf_printed`` reads
+    ``qgrbpf_printed``, not ``rbpf``)."""
     estimators = [c[len(prefix):] for c in columns if c.startswith(prefix)]
-    read = []
-    for metric in d.metrics:
-        matching = [m for m in estimators if metric == prefix + m or metric.endswith("_" + m)]
-        if matching:
-            read.append(max(matching, key=len))
-    return list(dict.fromkeys(read))
+    read = [_suffix_estimator(metric, estimators, prefix) for metric in d.metrics]
+    return list(dict.fromkeys(m for m in read if m is not None))
 
 
-def _sound(d: Declaration, decision: Decision, rows: pd.DataFrame,
-           policy: dict[str, Any]) -> Decision:
-    """Version 2: the decision checked against the soundness of each estimator it reads, on the
-    same records (:func:`railpaper.rulebook.soundness`)."""
+def soundness_column(estimator: str, prefix: str) -> str:
+    """The yes/no column of an estimator's soundness: ``<prefix><estimator>``, or the bare
+    ``satisfactory`` of a study's one filter (``estimator == ""``)."""
+    return prefix + estimator if estimator else prefix.rstrip("_")
+
+
+def estimators_credited(d: Declaration, rows: pd.DataFrame, policy: dict[str, Any],
+                        estimator_of: Callable[[str], str | None] | None = None) -> list[str]:
+    """Version 3: the estimators whose success a row asserts, which its soundness check reads.
+
+    Each metric's estimator is the study's catalogue's (``estimator_of(metric)``) where the
+    chapter gives one, else version 2's name rule; it counts only when the study has its
+    soundness column.  Then a row credits no estimator
+
+    * through a metric that records a failure (a token of the policy's ``failure_tokens`` in
+      its name, ``ekf_diverged_init1``): a filter that misses the posterior still fails;
+    * in a claimed offset (``departure``): a bias is a failure;
+    * through a single-run yes/no number the paper says did not happen (paper value 0);
+
+    and a paired change between two estimators credits only the one the claimed direction
+    favours: the second metric's when the change is an increase of a higher-is-better metric
+    (a token of ``higher_is_better_tokens``: converged, within, accuracy, ...) or a decrease of
+    a lower-is-better one (an error, a step, a time), else the first's (its baseline).
+    """
     prefix = policy["soundness_prefix"]
-    for estimator in estimators_read(d, list(rows.columns), prefix):
-        sound = rows[prefix + estimator].astype(bool)
-        decision = rulebook.soundness(decision, estimator, int(sound.sum()), len(sound),
+    failure = set(policy["failure_tokens"])
+    if d.procedure == "departure":
+        return []
+    named = [c[len(prefix):] for c in rows.columns if c.startswith(prefix)]
+
+    def estimator(metric: str) -> str | None:
+        if failure & set(metric.split("_")):
+            return None
+        found = (estimator_of(metric) if estimator_of is not None
+                 else _suffix_estimator(metric, named, prefix))
+        return found if found is not None and soundness_column(found, prefix) in rows.columns \
+            else None
+
+    read = [estimator(m) for m in d.metrics]
+    if d.procedure == "single-run" and d.paper_value:
+        read = [None if value == 0 and rows[m].dropna().isin((0, 1)).all() else e
+                for e, m, value in zip(read, d.metrics, d.paper_value)]
+    if d.procedure == "paired-change" and len(read) == 2 and read[0] != read[1]:
+        higher = bool(set(policy["higher_is_better_tokens"]) & set(d.metrics[1].split("_")))
+        read = [read[1] if (d.direction == "increase") == higher else read[0]]
+    return list(dict.fromkeys(e for e in read if e is not None))
+
+
+def _sound(d: Declaration, decision: Decision, rows: pd.DataFrame, policy: dict[str, Any],
+           version: int = 2, estimator_of: Callable[[str], str | None] | None = None
+           ) -> Decision:
+    """The decision checked against the soundness of each estimator it reads (version 2) or
+    credits (version 3), on the same records (:func:`railpaper.rulebook.soundness`).  Version 3
+    counts only the records whose exact posterior is known (the column is a number) and says
+    so when none is."""
+    prefix = policy["soundness_prefix"]
+    estimators = (estimators_read(d, list(rows.columns), prefix) if version < 3
+                  else estimators_credited(d, rows, policy, estimator_of))
+    for estimator in estimators:
+        column = rows[soundness_column(estimator, prefix)]
+        name = estimator or "filter"
+        if version >= 3:
+            column = column.dropna()
+            if column.empty:
+                if decision.verdict == "reproduced":
+                    decision = dataclasses.replace(decision, reason=(
+                        f"{decision.reason}; the {name}'s agreement with the exact posterior "
+                        "is not known on these records (not checked)"))
+                continue
+        sound = column.astype(bool)
+        decision = rulebook.soundness(decision, name, int(sound.sum()), len(sound),
                                       policy["soundness_threshold"], policy["level"])
     return decision
 
@@ -460,6 +531,6 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "decide", "estimators_read", "fingerprint", "first_records", "load_declarations",
-           "load_registry", "parse", "procedure_reregistrations", "register", "registered_size",
-           "revisions", "write_registry"]
+           "decide", "estimators_credited", "estimators_read", "fingerprint", "first_records",
+           "load_declarations", "load_registry", "parse", "procedure_reregistrations", "register", "registered_size",
+           "revisions", "soundness_column", "write_registry"]

@@ -54,6 +54,11 @@ from railpaper.pipeline.declarations import (
 )
 from railpaper.pipeline.evidence_store import EvidenceStore
 from railpaper.pipeline.ledger_figure import plot_ledger
+from railpaper.pipeline.soundness import (
+    estimator_catalogue,
+    posterior_study,
+    with_soundness,
+)
 from railpaper.rulebook import Decision, Vocabulary
 from railpaper.pipeline.outputs import claims
 
@@ -345,7 +350,9 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
         else:
             table, evidence = (study_rows(chapter, d.study, out, run, size) if d.study
                                else (None, "this run"))
-            decision, verdict = decide(d, vocabulary, table, values, size), ""
+            table = _with_posterior(chapter, d.study, table, out, run)
+            decision, verdict = decide(d, vocabulary, table, values, size,
+                                       estimator_of=estimator_catalogue(chapter, d.study)), ""
             decision = _with_cost(decision, chapter, d.study, size, table)
         verdict = verdict or decision.verdict
         paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
@@ -361,8 +368,11 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
             old = dataclasses.replace(old, procedure=vocabulary.entry(old.word_class)["procedure"])
             old_rows = (study_rows(chapter, old.study, out, run, before["size"])[0]
                         if old.study else None)
-            original = decide(old, vocabulary, old_rows, values, before["size"],
-                              before.get("procedure_version", 1)).verdict
+            old_version = before.get("procedure_version", 1)
+            if old_version >= 3:               # the soundness columns it was registered with
+                old_rows = _with_posterior(chapter, old.study, old_rows, out, run)
+            original = decide(old, vocabulary, old_rows, values, before["size"], old_version,
+                              estimator_catalogue(chapter, old.study)).verdict
         rows.append(LedgerRow(chapter, d.id, d.claim, d.source, paper, ours, verdict,
                               decision.reason, d.reading, d.id.split("__")[0],
                               f"{d.procedure} ({d.word_class})", list(d.paper_value) or None,
@@ -373,6 +383,19 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
                               evidence=evidence))
     mark_headlines(rows)
     return rows
+
+
+def _with_posterior(chapter: str, study: str, table: pd.DataFrame | None, out: Path,
+                    run: dict | None) -> pd.DataFrame | None:
+    """``table`` with its filters' soundness columns, where the chapter keeps the exact
+    posterior of ``study``'s records in a study of its own: that study's rows of the same
+    records, from this run or the stored decisive evidence (:func:`study_rows`)."""
+    posterior = posterior_study(chapter, study) if study and table is not None else None
+    if posterior is None or run is None:
+        return table
+    rows, _ = study_rows(chapter, posterior.name, out, run, len(table))
+    settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
+    return with_soundness(chapter, study, table, rows, settings)
 
 
 def previous_registration(entry: dict, vocabulary: Vocabulary) -> tuple[dict, str]:

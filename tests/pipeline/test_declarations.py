@@ -72,7 +72,7 @@ def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size()
     other_class = copy.deepcopy(VOCABULARY)
     other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
     assert fingerprint(d, other_class, 785) == base
-    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=3))
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=4))
     assert fingerprint(d, newer, 785) != base
 
 
@@ -276,3 +276,98 @@ def test_a_rate_counts_a_record_without_an_answer_as_no_under_version_2():
     rate = declaration(word_class="absolute", metrics=["converged"], direction="")
     assert decide(rate, VOCABULARY, rows, {}, procedure_version=1).statistic == 1.0
     assert decide(rate, VOCABULARY, rows, {}).statistic == 38 / 40
+
+
+# ---- procedure version 3: only the estimators a row credits, a study's catalogue, unknowns --
+
+def _toy_like_rows(n=100, sound_rbpf=10, sound_ekf=100):
+    """A toy-like study: the RBPF converges on 90 records, the EKF diverges on 95; soundness
+    columns named by estimator and initial condition (one NaN-free draw)."""
+    return pd.DataFrame({"seed": np.arange(n),
+                         "rbpf_converged_init1": np.arange(n) < 90,
+                         "ekf_converged_init1": np.arange(n) < 5,
+                         "ekf_diverged_init1": np.arange(n) >= 5,
+                         "satisfactory_rbpf_init1": (np.arange(n) < sound_rbpf).astype(float),
+                         "satisfactory_ekf_init1": (np.arange(n) < sound_ekf).astype(float)})
+
+
+def _catalogue(column):
+    for m in ("rbpf", "ekf"):
+        if column.startswith(m + "_") and column.endswith("_init1"):
+            return m + "_init1"
+    return None
+
+
+MAJORITY = dict(word_class="majority", direction="", kind="population")
+
+
+def test_version_3_reads_the_study_catalogue_and_checks_a_credited_estimator():
+    rows = _toy_like_rows(sound_rbpf=10)          # 10/100 sound: upper bound 0.176 < 0.5
+    row = declaration(metrics=["rbpf_converged_init1"], study="toy", **MAJORITY)
+    assert decide(row, VOCABULARY, rows, {}, procedure_version=2).verdict == "reproduced"
+    third = decide(row, VOCABULARY, rows, {}, estimator_of=_catalogue)
+    assert third.verdict == "artefact" and "rbpf_init1" in third.reason
+    # no catalogue: version 2's suffix rule finds no estimator in 'rbpf_converged_init1'
+    assert decide(row, VOCABULARY, rows, {}).verdict == "reproduced"
+
+
+def test_version_3_does_not_check_an_estimator_through_its_failure():
+    rows = _toy_like_rows(sound_ekf=0)            # the EKF never agrees with the posterior
+    fails = declaration(metrics=["ekf_diverged_init1"], study="toy", **MAJORITY)
+    assert decide(fails, VOCABULARY, rows, {}, estimator_of=_catalogue).verdict == "reproduced"
+    # a single-run 'it did not converge' (paper value 0 on a yes/no column) credits nobody
+    nope = declaration(metrics=["ekf_converged_init1"], study="toy", kind="single-run",
+                       word_class="value", direction="", paper_value=[0.0], resolution=[0.0],
+                       horizon="record end")
+    assert decide(nope, VOCABULARY, rows, {}, estimator_of=_catalogue).verdict == "reproduced"
+    # a departure (a claimed offset) credits nobody either
+    rng = np.random.default_rng(2)
+    offset = pd.DataFrame({"seed": np.arange(40), "ekf_final_error_x1_init1":
+                           0.5 + 0.01 * rng.standard_normal(40),
+                           "satisfactory_ekf_init1": np.zeros(40)})
+    biased = declaration(metrics=["ekf_final_error_x1_init1"], study="toy", kind="population",
+                         word_class="departure", direction="")
+    assert decide(biased, VOCABULARY, offset, {}, estimator_of=_catalogue).verdict \
+        == "reproduced"
+
+
+def test_version_3_checks_only_the_estimator_a_comparison_favours():
+    rows = _toy_like_rows(sound_rbpf=100, sound_ekf=0)
+    # 'the EKF converges less often than the RBPF' (baseline RBPF, decrease of a
+    # higher-is-better rate): it credits the RBPF, which is sound; the unsound EKF is the one
+    # the claim says fails
+    better = declaration(metrics=["rbpf_converged_init1", "ekf_converged_init1"], study="toy",
+                         direction="decrease")
+    assert decide(better, VOCABULARY, rows, {}, estimator_of=_catalogue).verdict == "reproduced"
+    assert decide(better, VOCABULARY, rows, {}, procedure_version=2,
+                  estimator_of=_catalogue).verdict == "reproduced"   # v2 found no name either
+    # the favoured RBPF unsound: artefact
+    rows = _toy_like_rows(sound_rbpf=0, sound_ekf=100)
+    assert decide(better, VOCABULARY, rows, {}, estimator_of=_catalogue).verdict == "artefact"
+    # a lower-is-better metric: a decrease of metrics[1] favours metrics[1]
+    settles = _settling_rows(sound_qg=8)
+    faster = declaration(metrics=["settling_step_a_rbpf", "settling_step_a_qgrbpf"],
+                         direction="decrease")
+    assert declarations.estimators_credited(faster, settles, VOCABULARY.policy) == ["qgrbpf"]
+    slower = declaration(metrics=["settling_step_a_rbpf", "settling_step_a_qgrbpf"],
+                         direction="increase")
+    assert declarations.estimators_credited(slower, settles, VOCABULARY.policy) == ["rbpf"]
+
+
+def test_version_3_counts_soundness_on_the_records_whose_posterior_is_known():
+    rows = _toy_like_rows(sound_rbpf=10)
+    rows.loc[40:, "satisfactory_rbpf_init1"] = np.nan       # known on 40: 10/40, high 0.41
+    row = declaration(metrics=["rbpf_converged_init1"], study="toy", **MAJORITY)
+    decision = decide(row, VOCABULARY, rows, {}, estimator_of=_catalogue)
+    assert decision.verdict == "artefact" and "10/40" in decision.reason
+    rows["satisfactory_rbpf_init1"] = np.nan                 # known nowhere: not checked
+    unknown = decide(row, VOCABULARY, rows, {}, estimator_of=_catalogue)
+    assert unknown.verdict == "reproduced" and "not checked" in unknown.reason
+
+
+def test_a_study_s_one_filter_reads_the_bare_soundness_column():
+    rows = pd.DataFrame({"seed": np.arange(100), "within_5pct_from_350": np.ones(100, bool),
+                         "satisfactory": np.zeros(100)})
+    row = declaration(metrics=["within_5pct_from_350"], study="lateral", **MAJORITY)
+    decision = decide(row, VOCABULARY, rows, {}, estimator_of=lambda column: "")
+    assert decision.verdict == "artefact" and "the filter ends within" in decision.reason

@@ -38,7 +38,12 @@ from railpaper.experiments.base import (
     check_sample_time,
     default_progress,
 )
-from railpaper.experiments.rbpf_parameter_estimation import evidence, lateral, posterior
+from railpaper.experiments.rbpf_parameter_estimation import (
+    evidence,
+    lateral,
+    posterior,
+    soundness,
+)
 from railpaper.experiments.rbpf_parameter_estimation.measurements import (
     read_measurements,
 )
@@ -55,7 +60,10 @@ from railpaper.threads import one_thread
 
 #: The chapter's per-record studies: the toy's records; each lateral RBPF scheme's, the
 #: augmented EKF's (one guess) and the truth plant with model error.
-STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR)
+#: The exact posterior of the toy's and the lateral records (the soundness of the filters,
+#: :mod:`~railpaper.experiments.rbpf_parameter_estimation.soundness`) follows them.
+STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR,
+           soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
 

@@ -67,12 +67,13 @@ def toy_box(settings: Settings, start: np.ndarray = toy.TOY_INITS[1]
 
 
 def toy_posterior(settings: Settings, sim: Simulation, seed: int,
-                  start: np.ndarray = toy.TOY_INITS[1]) -> PosteriorRun:
+                  start: np.ndarray = toy.TOY_INITS[1], salt: tuple[int, ...] = ()
+                  ) -> PosteriorRun:
     """The exact posterior of x1..x4 after every step of one toy record (IBIS, generator
-    ``[seed, 17]``) under the RBPF's prior box around ``start``, x0 = 0, P0 = I."""
+    ``[seed, 17, *salt]``) under the RBPF's prior box around ``start``, x0 = 0, P0 = I."""
     lower, upper = toy_box(settings, start)
     run = run_ibis(toy.system(settings), sim.y, lower, upper, np.zeros(2), np.eye(2),
-                   np.random.default_rng([seed, SEED_KEY]), u=sim.u,
+                   np.random.default_rng([seed, SEED_KEY, *salt]), u=sim.u,
                    n_particles=settings.toy_ibis_particles, proposal=PROPOSAL, min_moves=MIN_MOVES)
     return PosteriorRun.from_ibis(run)
 
