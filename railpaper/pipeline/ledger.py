@@ -568,8 +568,10 @@ def chapter_claims(chapter: str, out_dir: str | Path) -> str:
 
 
 def chapter_central_claims(chapter: str, out_dir: str | Path) -> str:
-    """A chapter's central claims judged on the run in ``out_dir`` (:func:`central_claims`)."""
-    return central_claims(run_rows(chapter, out_dir)[0])
+    """A chapter's central claims judged on the run in ``out_dir`` (:func:`central_claims`),
+    with its context sentences."""
+    rows, run = run_rows(chapter, out_dir)
+    return central_claims(rows, context_sentences(chapter, run))
 
 
 def chapter_claims_figure(chapter: str, out_dir: str | Path) -> Path:
@@ -711,9 +713,33 @@ def is_central(row: LedgerRow) -> bool:
     return row.headline and ("abstract" in where or "conclusion" in where)
 
 
-def central_claims(rows: list[LedgerRow]) -> str:
+#: Per chapter, ``data/<chapter>/context.toml``: sentences of ours that a reader of the central
+#: claims should have beside them (a baseline, not a claim of the paper's), filled from the run.
+CONTEXT_FILE = "context.toml"
+
+
+def context_sentences(chapter: str, run: dict | None, data_dir: Path = DATA_DIR) -> str:
+    """The chapter's context sentences (``[[context]]`` tables: ``text`` with ``{name}``
+    fields, and ``[context.values]`` naming each field's ``metric`` and ``scale``), filled from
+    the run's metrics; a sentence whose metric the run lacks is left out."""
+    path = Path(data_dir) / chapter / CONTEXT_FILE
+    if run is None or not path.exists():
+        return ""
+    metrics, lines = run.get("metrics", {}), []
+    for entry in read_toml(path).get("context", []):
+        values = {name: metrics.get(spec["metric"]) for name, spec in entry["values"].items()}
+        if any(v is None for v in values.values()):
+            continue
+        scaled = {name: float(values[name]) * spec.get("scale", 1.0)
+                  for name, spec in entry["values"].items()}
+        lines.append(f"- *Context (ours, not a claim of the paper's):* "
+                     f"{' '.join(entry['text'].split()).format(**scaled)}")
+    return "\n".join(lines) + "\n" if lines else ""
+
+
+def central_claims(rows: list[LedgerRow], context: str = "") -> str:
     """The paper's central claims, one plain sentence each with its verdict (the first row of
-    each central claim: its default reading)."""
+    each central claim: its default reading), then the chapter's ``context`` sentences."""
     lines = []
     for group in claim_groups(rows):
         head = next((r for r in group if r.headline), group[0])
@@ -726,15 +752,19 @@ def central_claims(rows: list[LedgerRow]) -> str:
                        "came after the evidence had been seen.")
         lines.append(f"- The paper's claim that {claim} {VERDICT_SENTENCES[head.verdict]} "
                      f"({verdict_badge(head.verdict)}).{changed}")
-    return "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"
+    text = "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"
+    return text + context
 
 
-def central_claims_page(rows: list[LedgerRow], titles: dict[str, str]) -> str:
-    """The intro's section: each paper in one paragraph of its central claims."""
+def central_claims_page(rows: list[LedgerRow], titles: dict[str, str],
+                        contexts: dict[str, str] | None = None) -> str:
+    """The intro's section: each paper in one paragraph of its central claims (and the
+    chapter's context sentences, :func:`context_sentences`)."""
     lines = []
     for chapter in dict.fromkeys(r.chapter for r in rows):
         mine = [r for r in rows if r.chapter == chapter]
-        lines += [f"**{_cell(titles.get(chapter, chapter))}**", "", central_claims(mine)]
+        lines += [f"**{_cell(titles.get(chapter, chapter))}**", "",
+                  central_claims(mine, (contexts or {}).get(chapter, ""))]
     return "\n".join(lines)
 
 
@@ -774,8 +804,10 @@ def write_ledger(book_dir: str | Path, chapters: list[str],
     path = Path(book_dir) / "_generated" / "claims_ledger.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(ledger_markdown(rows, {c: title(c) for c in chapters}))
+    contexts = {c: context_sentences(c, _read_json(Path(book_dir) / "chapters" / c /
+                                                   "metrics.json")) for c in chapters}
     path.with_name("central_claims.md").write_text(
-        central_claims_page(rows, {c: title(c) for c in chapters}))
+        central_claims_page(rows, {c: title(c) for c in chapters}, contexts))
     write_ledger_csv(rows, path.with_suffix(".csv"))
     plot_ledger(rows, {c: title(c) for c in chapters}, path.with_suffix(".png"))
     return path

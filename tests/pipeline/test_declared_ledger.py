@@ -82,3 +82,15 @@ def test_too_few_records_and_no_stored_evidence_is_undecided(tmp_path):
     (decided,) = ledger.declared_rows(CHAPTER, out, run, None, data, registry=registry)
     assert decided.verdict == "undecided"
     assert "60 records of the 5000 registered" in decided.reason   # the store holds fewer too
+
+
+def test_context_sentences_are_filled_from_the_run_and_follow_the_central_claims(tmp_path):
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "context.toml").write_text(
+        '[[context]]\ntext = """The baseline is {base_mm:.3g}\n mm."""\n'
+        '[context.values]\nbase_mm = { metric = "base_m", scale = 1000.0 }\n'
+        '[[context]]\ntext = "Left out: {x}"\n[context.values]\nx = { metric = "absent" }\n')
+    text = ledger.context_sentences("demo", {"metrics": {"base_m": 0.0167}}, tmp_path)
+    assert text == ("- *Context (ours, not a claim of the paper's):* The baseline is 16.7 mm.\n")
+    assert ledger.context_sentences("demo", None, tmp_path) == ""
+    assert ledger.central_claims([], text).endswith(text)
