@@ -117,14 +117,14 @@ def toy_posteriors(settings: Settings, part: ToyPart) -> ToyPart:
 
 def toy_metrics(part: ToyPart) -> dict:
     """Coverage of the 90 % intervals over toy records × parameters (initial condition 1):
-    ``coverage_90_working_toy`` (IBIS), ``coverage_90_paper_scheme_toy``,
+    ``coverage_90_exact_posterior_toy`` (IBIS), ``coverage_90_paper_scheme_toy``,
     ``coverage_90_tempered_toy`` (our tempered RBPF), each with ``_low``, ``_high``, ``_n``
     (95 % Clopper–Pearson); and the illustrated record's posterior sd after the last step,
     ``toy_posterior_sd_final_x<j>``."""
     c = part.coverage
     out = {}
-    for column, name in (("posterior_covers", "working"), ("paper_covers", "paper_scheme"),
-                         ("tempered_covers", "tempered")):
+    for column, name in (("posterior_covers", "exact_posterior"),
+                         ("paper_covers", "paper_scheme"), ("tempered_covers", "tempered")):
         out.update(rate(c[column].to_numpy(bool)).metrics(f"coverage_90_{name}_toy"))
     for j in range(4):
         out[f"toy_posterior_sd_final_x{j + 1}"] = float(part.posterior.sd[-1, j])
@@ -168,7 +168,7 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
         ``posterior_sd_rel_350_max`` (median over records of the largest relative posterior sd
         at step 350), ``posterior_sd_rel_350_median_<param>`` (median over records), and the
         coverage of the 90 % intervals at the last step over records × parameters:
-        ``coverage_90_working_lateral`` (IBIS), ``coverage_90_paper_scheme_lateral``,
+        ``coverage_90_exact_posterior_lateral`` (IBIS), ``coverage_90_paper_scheme_lateral``,
         ``coverage_90_tempered_lateral`` (our tempered RBPF).
     """
     runs = [r for r in part.runs if r.posterior is not None]
@@ -188,7 +188,7 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
     for j, name in enumerate(lateral_16state.PARAM_NAMES):
         out.update(median_interval(sd350[:, j]).metrics(f"posterior_sd_rel_350_median_{name}"))
     ones = np.ones(len(lateral_16state.PARAM_NAMES))
-    covers = {"working": [credible_interval_covers(r.posterior, ones) for r in runs],
+    covers = {"exact_posterior": [credible_interval_covers(r.posterior, ones) for r in runs],
               "paper_scheme": [toy.gaussian_covers(r.rbpf_paper_norm[-1],
                                                    r.rbpf_paper_sd_norm[-1], 1.0) for r in runs],
               "tempered": [toy.gaussian_covers(r.rbpf_working_norm[-1],

@@ -173,12 +173,12 @@ def text_markdown(frame: pd.DataFrame) -> str:
 
 
 #: Coverage metrics (without ``_toy``/``_lateral``) -> the scheme as a reader knows it.
-COVERAGE = {"coverage_90_working": "exact posterior (IBIS), 5–95 % quantiles",
+COVERAGE = {"coverage_90_exact_posterior": "exact posterior (IBIS), 5–95 % quantiles",
             "coverage_90_paper_scheme": "RBPF, paper's scheme, mean ± 1.645 sd",
             "coverage_90_tempered": "RBPF, our tempered scheme, mean ± 1.645 sd"}
 
 #: The same, short.
-SHORT = {"coverage_90_working": "the exact posterior", "coverage_90_paper_scheme":
+SHORT = {"coverage_90_exact_posterior": "the exact posterior", "coverage_90_paper_scheme":
          "the paper's scheme", "coverage_90_tempered": "our tempered scheme"}
 
 
@@ -361,8 +361,8 @@ def what_works_markdown(m: dict) -> str:
         "**For the estimate and its uncertainty, sample the exact posterior.** Given θ the "
         "model is linear-Gaussian, so IBIS (or any sampler of the posterior) needs no "
         "artificial parameter noise; its 90 % intervals cover the truth on "
-        f"{_rate(m, 'coverage_90_working_lateral')} of the vehicle's records × parameters "
-        f"(toy: {_rate(m, 'coverage_90_working_toy')}), against "
+        f"{_rate(m, 'coverage_90_exact_posterior_lateral')} of the vehicle's records × parameters "
+        f"(toy: {_rate(m, 'coverage_90_exact_posterior_toy')}), against "
         f"{_rate(m, 'coverage_90_paper_scheme_lateral')} for the paper's scheme and "
         f"{_rate(m, 'coverage_90_tempered_lateral')} for our tempered scheme.",
         ("**5 % after 350 steps is within what simulated data allow**"

@@ -315,12 +315,12 @@ def test_lateral_posterior_metrics_count_by_hand(quick_result):
     settings, result = quick_result
     m, runs = result.metrics, [r for r in result.lateral.runs if r.posterior is not None]
     z = 1.6448536269514722
-    counts = {"working": 0, "paper_scheme": 0, "tempered": 0}
+    counts = {"exact_posterior": 0, "paper_scheme": 0, "tempered": 0}
     within = 0
     for r in runs:
         p = r.posterior
         for j in range(5):
-            counts["working"] += p.q05[-1, j] <= 1.0 <= p.q95[-1, j]
+            counts["exact_posterior"] += p.q05[-1, j] <= 1.0 <= p.q95[-1, j]
             counts["paper_scheme"] += abs(r.rbpf_paper_norm[-1, j] - 1) <= z * \
                 r.rbpf_paper_sd_norm[-1, j]
             counts["tempered"] += abs(r.rbpf_working_norm[-1, j] - 1) <= z * \

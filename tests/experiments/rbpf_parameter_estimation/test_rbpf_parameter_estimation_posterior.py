@@ -133,8 +133,8 @@ def test_toy_coverage_table_and_metrics_count_by_hand(toy_files):
         assert row.paper_covers == (abs(run.rbpf_paper[-1, j] - toy.truth[j]) <= half)
         half = 1.6448536269514722 * run.rbpf_working_sd[-1, j]
         assert row.tempered_covers == (abs(run.rbpf_working[-1, j] - toy.truth[j]) <= half)
-    for column, name in (("posterior_covers", "working"), ("paper_covers", "paper_scheme"),
-                         ("tempered_covers", "tempered")):
+    for column, name in (("posterior_covers", "exact_posterior"),
+                         ("paper_covers", "paper_scheme"), ("tempered_covers", "tempered")):
         k, n = int(cov[column].sum()), len(cov)
         ci = binomtest(k, n).proportion_ci(0.95, method="exact")
         key = f"coverage_90_{name}_toy"
