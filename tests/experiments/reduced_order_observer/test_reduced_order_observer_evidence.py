@@ -126,6 +126,27 @@ def test_fixed_noise_equals_proportional_at_reference_speed(small):
     assert not np.allclose(other.force_rms_error_N_fixed_noise, other.force_rms_error_N, rtol=1e-3)
 
 
+def test_noise_as_printed_is_the_run_without_sensor_noise():
+    # D as printed puts the noise on Z_w alone, which the observer never reads: its columns are
+    # the default columns of a run with no sensor noise on the channels it reads, bit for bit,
+    # and they differ from the noisy ones
+    settings = SPEC.resolve(SMALL, quick=True)
+    seeds = (settings.seed, settings.seed + 1)
+    rows = ev.monte_carlo_rows(settings, seeds)
+    quiet = ev.monte_carlo_rows(settings.replace(noise_fraction=0.0, track_noise_fraction=0.0),
+                                seeds)
+    for name in ("convergence_time_s", "displacement_rms_error_m",
+                 "displacement_relative_rms_error", "force_rms_error_N",
+                 "force_relative_rms_error"):
+        for reading in READINGS:
+            for speed in ev.all_speeds(settings):
+                printed = ev.sample_column(name + ev.NOISE_AS_PRINTED, reading, speed)
+                default = ev.sample_column(name, reading, speed)
+                np.testing.assert_array_equal(rows[printed], quiet[default])
+    noisy = ev.sample_column("displacement_rms_error_m", "wheel", 60.0)
+    assert not np.allclose(rows[noisy], quiet[noisy], rtol=1e-3)
+
+
 def test_evidence_metrics_recomputed_by_hand(small):
     settings, table = small
     m = ev.evidence_metrics(table, settings)
