@@ -18,8 +18,11 @@ threshold of a claim's own.
   :func:`departure` — a claimed offset ('biased'), its mirror;
 * :func:`deterministic`, :func:`design`, :func:`implementation` — exact values, stated checks
   and rates; :func:`cost_ratio` — a time ratio or share measured on this machine;
-* :func:`soundness` (procedure version 2) — a *reproduced* read off an estimator that misses
-  the exact posterior on most of the same records is an *artefact*.
+* :func:`attainable` (procedure version 4) — a *reproduced* read off a method that is not the
+  paper's (declared blind per reading, ``data/<chapter>/methods.toml``) is *attainable*;
+* :func:`soundness` (procedure version 2; version 3 applies it only to the estimators a row
+  credits) — a *reproduced* read off an estimator that misses the exact posterior on most of
+  the same records is an *artefact*.
 
 Sample sizes come from power, before the deciding run (:func:`rate_size`,
 :func:`continuous_size`, :func:`single_run_size`).
@@ -47,7 +50,7 @@ from scipy import stats as scipy_stats
 from railpaper.paths import DATA_DIR
 
 VOCABULARY_FILE = DATA_DIR / "vocabulary.toml"
-VERDICTS = ("reproduced", "artefact", "differs", "undecided", "not testable")
+VERDICTS = ("reproduced", "attainable", "artefact", "differs", "undecided", "not testable")
 PROCEDURES = ("single-run", "population-rate", "paired-change", "equivalence", "departure",
               "deterministic", "design", "implementation")
 DIRECTIONS = ("increase", "decrease")
@@ -317,8 +320,10 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
     *reproduced* becomes an *artefact* when the Clopper–Pearson interval of ``sound / n`` lies
     wholly below ``threshold``: the claimed number (a convergence step, an error, a gain) comes
     from a filter that misses the exact posterior on most records.  Every other verdict, and a
-    sound estimator's, is returned as it is.  Only studies that compute the exact posterior
-    per record carry the columns this reads (chapter 004's).
+    sound estimator's, is returned as it is.  Only studies whose records have their exact
+    posterior carry the columns this reads (chapter 004's in the filters' own rows; chapter
+    003's joined from its posterior studies); which estimators a row is checked against is the
+    caller's (:func:`railpaper.pipeline.declarations.estimators_credited`, version 3).
 
     >>> soundness(Decision("reproduced", "settles at step 4"), "qgrbpf", 8, 150).verdict
     'artefact'
@@ -335,6 +340,24 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
         f"deviations of the exact posterior mean on only {sound}/{n} of these records "
         f"[{low:.3g}, {high:.3g}], wholly below {threshold:g}: the number comes from a filter "
         "that misses the posterior it approximates"))
+
+
+def attainable(decision: Decision, why: str) -> Decision:
+    """A verdict read off a method or design that is not the paper's (procedure version 4): a
+    *reproduced* becomes *attainable* — the claim holds, but with our method, not the paper's,
+    so it is never counted as reproduced.  ``why`` says whose method it is.  Every other
+    verdict is returned as it is (a *differs* from our method still says the claim does not
+    hold there).
+
+    >>> attainable(Decision("reproduced", "settles at step 4"), "our observer").verdict
+    'attainable'
+    >>> attainable(Decision("differs", "settles at step 40"), "our observer").verdict
+    'differs'
+    """
+    if decision.verdict != "reproduced":
+        return decision
+    return dataclasses.replace(decision, verdict="attainable", reason=(
+        f"{decision.reason}; but the numbers come from a method that is not the paper's ({why})"))
 
 
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:

@@ -34,6 +34,7 @@ can show the old verdict beside the new one and the intro counts revisions from 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import tomllib
@@ -214,10 +215,13 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
 
 def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | None) -> str:
     """SHA-256 (first 16 hex digits) of the canonical declaration, the vocabulary entries it
-    reads, the procedures' version and the registered size."""
+    reads, the procedures' version, the registered size and (from version 4) whether its
+    reading's method is not the paper's (:func:`method_not_the_papers`)."""
     payload = {"declaration": declaration.canonical(),
                "vocabulary": vocabulary_entries(declaration, vocabulary),
                "procedure_version": vocabulary.policy["procedure_version"], "size": size}
+    if vocabulary.policy["procedure_version"] >= 4:     # whose method the reading is
+        payload["method_not_the_papers"] = method_not_the_papers(declaration)
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -311,10 +315,58 @@ def first_records(rows: pd.DataFrame | None, size: int | None) -> pd.DataFrame |
     return rows.sort_values("seed", kind="stable").head(size).reset_index(drop=True)
 
 
+#: Per chapter, ``data/<chapter>/methods.toml``: which readings' numbers come from a method that
+#: is not the paper's (declared blind, ``data/blind/methods_brief.md``), and why.
+METHODS_FILE = "methods.toml"
+#: The reading of a row declared without one.
+AS_STATED = "as stated"
+
+
+@functools.lru_cache(maxsize=16)
+def chapter_methods(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
+    """``{reading: why}`` of the chapter's readings whose method is not the paper's (empty
+    without a methods file)."""
+    path = Path(data_dir) / chapter / METHODS_FILE
+    if not path.exists():
+        return {}
+    table = tomllib.loads(path.read_text())
+    why = table.get("why", {})
+    missing = [r for r in table.get("ours", []) if r not in why]
+    if missing:
+        raise DataError(f"{path}: reading {missing[0]!r} is listed as ours without a 'why'")
+    return {reading: why[reading] for reading in table.get("ours", [])}
+
+
+def method_not_the_papers(d: Declaration, methods: dict[str, str] | None = None) -> str:
+    """Why the row's numbers come from a method that is not the paper's ('' when they come from
+    the paper's own): its id, else its reading (``as stated`` when it has none), looked up in
+    ``methods`` (the chapter's :func:`chapter_methods` by default; a methods file lists
+    readings, and row ids where one row of a reading differs from the rest)."""
+    methods = chapter_methods(d.chapter) if methods is None else methods
+    return methods.get(d.id) or methods.get(d.reading or AS_STATED, "")
+
+
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
            metrics: dict[str, Any], size: int | None = None,
            procedure_version: int | None = None,
-           estimator_of: Callable[[str], str | None] | None = None) -> Decision:
+           estimator_of: Callable[[str], str | None] | None = None,
+           methods: dict[str, str] | None = None) -> Decision:
+    """The row's verdict by its class's procedure (:func:`decide_procedure`); from version 4 a
+    *reproduced* whose numbers come from a method that is not the paper's (``methods``: the
+    chapter's :func:`chapter_methods` by default) is *attainable*
+    (:func:`railpaper.rulebook.attainable`)."""
+    version = (vocabulary.policy["procedure_version"] if procedure_version is None
+               else procedure_version)
+    decision = decide_procedure(declaration, vocabulary, rows, metrics, size, version,
+                                estimator_of)
+    why = method_not_the_papers(declaration, methods) if version >= 4 else ""
+    return rulebook.attainable(decision, why) if why else decision
+
+
+def decide_procedure(declaration: Declaration, vocabulary: Vocabulary,
+                     rows: pd.DataFrame | None, metrics: dict[str, Any],
+                     size: int | None = None, procedure_version: int | None = None,
+                     estimator_of: Callable[[str], str | None] | None = None) -> Decision:
     """The row's verdict by its class's procedure: from the per-record ``rows`` of its study
     (single-run, rates, changes, equivalences) or the run's ``metrics`` (deterministic, design,
     implementation).  A sampled row with fewer records than its registered ``size`` is
@@ -531,6 +583,7 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "decide", "estimators_credited", "estimators_read", "fingerprint", "first_records",
-           "load_declarations", "load_registry", "parse", "procedure_reregistrations", "register", "registered_size",
+           "chapter_methods", "decide", "decide_procedure", "estimators_credited",
+           "estimators_read", "fingerprint", "first_records", "load_declarations",
+           "load_registry", "method_not_the_papers", "parse", "procedure_reregistrations", "register", "registered_size",
            "revisions", "soundness_column", "write_registry"]

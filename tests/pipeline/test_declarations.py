@@ -72,7 +72,7 @@ def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size()
     other_class = copy.deepcopy(VOCABULARY)
     other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
     assert fingerprint(d, other_class, 785) == base
-    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=4))
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=5))
     assert fingerprint(d, newer, 785) != base
 
 
@@ -371,3 +371,39 @@ def test_a_study_s_one_filter_reads_the_bare_soundness_column():
     row = declaration(metrics=["within_5pct_from_350"], study="lateral", **MAJORITY)
     decision = decide(row, VOCABULARY, rows, {}, estimator_of=lambda column: "")
     assert decision.verdict == "artefact" and "the filter ends within" in decision.reason
+
+
+# ---- procedure version 4: a method that is not the paper's ---------------------------------
+
+def test_version_4_makes_a_reproduced_from_our_method_attainable():
+    rows = _toy_like_rows()
+    ours = declaration(metrics=["rbpf_converged_init1"], study="toy", reading="working_scheme",
+                       **MAJORITY)
+    methods = {"working_scheme": "our tempered RBPF"}
+    third = decide(ours, VOCABULARY, rows, {}, procedure_version=3, methods=methods)
+    assert third.verdict == "reproduced"
+    fourth = decide(ours, VOCABULARY, rows, {}, procedure_version=4, methods=methods)
+    assert fourth.verdict == "attainable" and "our tempered RBPF" in fourth.reason
+    assert fourth.statistic == third.statistic
+    # the paper's own reading, or a row that does not hold, stays as it is
+    paper = dataclasses.replace(ours, reading="")
+    assert decide(paper, VOCABULARY, rows, {}, procedure_version=4, methods=methods
+                  ).verdict == "reproduced"
+    fails = declaration(metrics=["ekf_converged_init1"], study="toy", reading="working_scheme",
+                        **MAJORITY)
+    assert decide(fails, VOCABULARY, rows, {}, procedure_version=4, methods=methods
+                  ).verdict == "differs"
+    # a row without a reading is looked up as 'as stated'
+    assert declarations.method_not_the_papers(paper, {"as stated": "our observer"}) \
+        == "our observer"
+
+
+def test_a_methods_file_needs_a_reason_for_every_reading_it_calls_ours(tmp_path):
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "methods.toml").write_text(
+        'ours = ["hb0"]\npaper = ["labels"]\n[why]\nhb0 = "a variant of ours"\n')
+    assert declarations.chapter_methods("demo", tmp_path) == {"hb0": "a variant of ours"}
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "methods.toml").write_text('ours = ["hb0"]\n')
+    with pytest.raises(DataError, match="'hb0' is listed as ours without a 'why'"):
+        declarations.chapter_methods("other", tmp_path)
