@@ -110,6 +110,7 @@ class LedgerRow:
     central: bool = False
     fingerprint: str = ""
     evidence: str = ""
+    by_version: dict = dataclasses.field(default_factory=dict)
 
 
 def claims_label(chapter: str) -> str:
@@ -346,13 +347,17 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
         size = entry.get("size")
         if run is None:
             decision, evidence = Decision("undecided", "the chapter has not been run"), ""
-            verdict = "missing"
+            verdict, by_version = "missing", {}
         else:
             table, evidence = (study_rows(chapter, d.study, out, run, size) if d.study
                                else (None, "this run"))
             table = _with_posterior(chapter, d.study, table, out, run)
+            catalogue = estimator_catalogue(chapter, d.study)
             decision, verdict = decide(d, vocabulary, table, values, size,
-                                       estimator_of=estimator_catalogue(chapter, d.study)), ""
+                                       estimator_of=catalogue), ""
+            by_version = {version: _verdict_under(d, vocabulary, table, values, size, version,
+                                                  catalogue)
+                          for version in range(1, vocabulary.policy["procedure_version"] + 1)}
             decision = _with_cost(decision, chapter, d.study, size, table)
         verdict = verdict or decision.verdict
         paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
@@ -380,7 +385,7 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
                               d.kind, "", size, False, revised, original,
                               procedure=d.procedure, words=d.words, horizon=d.horizon,
                               central=d.central, fingerprint=entry.get("fingerprint", ""),
-                              evidence=evidence))
+                              evidence=evidence, by_version=by_version))
     mark_headlines(rows)
     return rows
 
@@ -396,6 +401,16 @@ def _with_posterior(chapter: str, study: str, table: pd.DataFrame | None, out: P
     rows, _ = study_rows(chapter, posterior.name, out, run, len(table))
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     return with_soundness(chapter, study, table, rows, settings)
+
+
+def _verdict_under(d: Declaration, vocabulary: Vocabulary, table, values: dict, size,
+                   version: int, catalogue) -> str:
+    """The row's verdict under an earlier version of the procedures, on the same declaration,
+    size and evidence (version 1 raised where a baseline's mean is 0: undecided here)."""
+    try:
+        return decide(d, vocabulary, table, values, size, version, catalogue).verdict
+    except ValueError:
+        return "undecided"
 
 
 def previous_registration(entry: dict, vocabulary: Vocabulary) -> tuple[dict, str]:
@@ -768,6 +783,26 @@ def central_claims_page(rows: list[LedgerRow], titles: dict[str, str],
     return "\n".join(lines)
 
 
+def version_table(rows: list[LedgerRow]) -> str:
+    """Markdown: every declared row's verdict counted under each version of the decision
+    procedures, on the same declarations, sizes and evidence, so that what each version changed
+    is computed, not typed."""
+    declared = [r for r in rows if r.by_version]
+    if not declared:
+        return ""
+    versions = sorted({v for r in declared for v in r.by_version})
+    shown = [v for v in RULE_VERDICTS]
+    lines = ["| procedures | " + " | ".join(shown) + " | rows that moved from the version "
+             "before |", "|---|" + "---|" * (len(shown) + 1)]
+    for version in versions:
+        counts = [sum(r.by_version.get(version) == v for r in declared) for v in shown]
+        moved = ("—" if version == versions[0] else
+                 str(sum(r.by_version.get(version) != r.by_version.get(version - 1)
+                         for r in declared)))
+        lines.append(f"| version {version} | " + " | ".join(map(str, counts)) + f" | {moved} |")
+    return "\n".join(lines) + "\n"
+
+
 def ledger_counts(rows: list[LedgerRow]) -> dict[str, dict[str, int]]:
     """``{chapter: {verdict: count}}``."""
     out: dict[str, dict[str, int]] = {}
@@ -808,6 +843,7 @@ def write_ledger(book_dir: str | Path, chapters: list[str],
                                                    "metrics.json")) for c in chapters}
     path.with_name("central_claims.md").write_text(
         central_claims_page(rows, {c: title(c) for c in chapters}, contexts))
+    path.with_name("procedure_versions.md").write_text(version_table(rows))
     write_ledger_csv(rows, path.with_suffix(".csv"))
     plot_ledger(rows, {c: title(c) for c in chapters}, path.with_suffix(".png"))
     return path

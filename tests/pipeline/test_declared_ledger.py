@@ -94,3 +94,18 @@ def test_context_sentences_are_filled_from_the_run_and_follow_the_central_claims
     assert text == ("- *Context (ours, not a claim of the paper's):* The baseline is 16.7 mm.\n")
     assert ledger.context_sentences("demo", None, tmp_path) == ""
     assert ledger.central_claims([], text).endswith(text)
+
+
+def test_the_version_table_counts_each_version_and_the_rows_that_moved():
+    rows = [ledger.LedgerRow("demo", f"r{i}", "c", "s", "", "", verdict, "",
+                             by_version=dict(enumerate(history, start=1)))
+            for i, (verdict, history) in enumerate([
+                ("attainable", ("reproduced", "reproduced", "reproduced", "attainable")),
+                ("artefact", ("reproduced", "artefact", "artefact", "artefact")),
+                ("differs", ("differs", "differs", "differs", "differs"))])]
+    table = ledger.version_table(rows).splitlines()
+    assert table[0].startswith("| procedures | reproduced | attainable | artefact | differs")
+    assert table[2] == "| version 1 | 2 | 0 | 0 | 1 | 0 | 0 | — |"
+    assert table[3] == "| version 2 | 1 | 0 | 1 | 1 | 0 | 0 | 1 |"
+    assert table[5] == "| version 4 | 0 | 1 | 1 | 1 | 0 | 0 | 1 |"
+    assert ledger.version_table([]) == ""
