@@ -186,18 +186,25 @@ def scheme_row(seed: int, norm: np.ndarray, start: int = CLAIM_STEP, tol: float 
             "within_5pct_at_350": at, **final_errors(norm)}
 
 
-def scheme_rows(settings: Settings, seeds, scheme: str) -> pd.DataFrame:
-    """:func:`scheme_row` of the ``scheme`` RBPF (:func:`lateral_rbpf`) on each simulated
-    record of ``seeds``, one after another on one thread."""
+def filtered_records(settings: Settings, seeds, filter_row) -> pd.DataFrame:
+    """One row per seed of ``seeds``, in order, on one thread: ``filter_row(seed, record,
+    system, theta)`` on the record of each seed (:func:`lateral_record`) and its filters'
+    model (:func:`record_system`) — the loop every lateral per-record study shares."""
     fixed, theta = vehicle()
     rows = []
     with one_thread():
         for seed in seeds:
             record = lateral_record(settings, fixed, theta, int(seed))
             system = record_system(settings, fixed, theta, record)
-            run = lateral_rbpf(settings, system, record, theta, int(seed), scheme)
-            rows.append(scheme_row(int(seed), run.theta_mean / theta))
+            rows.append(filter_row(int(seed), record, system, theta))
     return pd.DataFrame(rows)
+
+
+def scheme_rows(settings: Settings, seeds, scheme: str) -> pd.DataFrame:
+    """:func:`scheme_row` of the ``scheme`` RBPF (:func:`lateral_rbpf`) on each simulated
+    record of ``seeds``, one after another on one thread."""
+    return filtered_records(settings, seeds, lambda seed, record, system, theta: scheme_row(
+        seed, lateral_rbpf(settings, system, record, theta, seed, scheme).theta_mean / theta))
 
 
 def paper_scheme_rows(settings: Settings, seeds) -> pd.DataFrame:

@@ -32,11 +32,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.rbpf_parameter_estimation import toy
-from railpaper.experiments.rbpf_parameter_estimation.lateral import (
-    lateral_record,
-    record_system,
-    vehicle,
-)
+from railpaper.experiments.rbpf_parameter_estimation.lateral import filtered_records
 from railpaper.experiments.rbpf_parameter_estimation.posterior import (
     lateral_posterior,
     toy_posterior,
@@ -79,19 +75,15 @@ def lateral_posterior_rows(settings: Settings, seeds) -> pd.DataFrame:
     """The study :data:`LATERAL_POSTERIOR`'s rows: per seed, ``posterior_mean_<param>`` and
     ``posterior_sd_<param>`` of θ / θ_true after the last step (1) of the simulated record the
     lateral studies filter."""
-    fixed, theta = vehicle()
-    rows = []
-    with one_thread():
-        for seed in seeds:
-            record = lateral_record(settings, fixed, theta, int(seed))
-            system = record_system(settings, fixed, theta, record)
-            post = lateral_posterior(settings, system, record, theta, int(seed))
-            row = {"seed": int(seed)}
-            for j, name in enumerate(lateral_16state.PARAM_NAMES):
-                row[f"posterior_mean_{name}"] = float(post.mean[-1, j])
-                row[f"posterior_sd_{name}"] = float(post.sd[-1, j])
-            rows.append(row)
-    return pd.DataFrame(rows)
+    def row(seed, record, system, theta) -> dict:
+        post = lateral_posterior(settings, system, record, theta, seed)
+        out = {"seed": seed}
+        for j, name in enumerate(lateral_16state.PARAM_NAMES):
+            out[f"posterior_mean_{name}"] = float(post.mean[-1, j])
+            out[f"posterior_sd_{name}"] = float(post.sd[-1, j])
+        return out
+
+    return filtered_records(settings, seeds, row)
 
 
 #: The toy's exact posterior per record (both initial conditions' boxes).
