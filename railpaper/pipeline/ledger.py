@@ -475,17 +475,19 @@ def claim_groups(rows: list[LedgerRow]) -> list[list[LedgerRow]]:
 def headline(rows: list[LedgerRow]) -> str:
     """``"17 claims: 5 reproduced, 8 differs, …; attainable by other methods: 3"``.
 
-    Counts claims, each once, by its headline row (default reading, the paper's method; a claim
-    our design attains counts as not testable for the paper); claims shown attainable by another
+    Counts claims, each once, by its headline row (default reading, the paper's method; under
+    the v2 rules a claim our design attains counts as not testable for the paper, under the
+    rulebook it is counted as attainable, never as reproduced); claims shown attainable by another
     method (its first row, i.e. its default reading) and claims of our own methods are counted
     apart.
     """
     groups = claim_groups(rows)
     heads = [r for g in groups for r in g if r.headline]
     others = [g for g in groups if not any(r.headline for r in g)]
-    # a claim our design attains is not testable for the paper's method (listed apart below)
-    counted = [replace(r, verdict="not testable") if r.verdict == "attainable" else r
-               for r in heads]
+    # under the v2 rules a claim our design attains is not testable for the paper's method
+    # (listed apart below); under the rulebook (a declared row) 'attainable' is its verdict
+    counted = [replace(r, verdict="not testable")
+               if r.verdict == "attainable" and not r.procedure else r for r in heads]
     # attainable by another method: that method's first row (its default reading) says so
     attainable = sum(next((r.verdict for r in g if r.method), "") == "attainable"
                      for g in groups if any(r.headline for r in g))
@@ -765,6 +767,12 @@ def central_claims(rows: list[LedgerRow], context: str = "") -> str:
         if head.revised and head.original_verdict and head.original_verdict != head.verdict:
             changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
                        "came after the evidence had been seen.")
+        earlier = [v for v in sorted(head.by_version)[:-1]
+                   if head.by_version[v] != head.by_version[v + 1]]
+        if earlier and not changed:
+            v = earlier[-1]
+            changed = (f" It read {head.by_version[v]} under version {v} of the decision "
+                       f"procedures; version {v + 1} changed it (the table of versions).")
         lines.append(f"- The paper's claim that {claim} {VERDICT_SENTENCES[head.verdict]} "
                      f"({verdict_badge(head.verdict)}).{changed}")
     text = "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"

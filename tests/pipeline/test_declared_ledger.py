@@ -4,6 +4,7 @@ per-record rows and the registry (size, fingerprint, the previous declaration's 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -109,3 +110,23 @@ def test_the_version_table_counts_each_version_and_the_rows_that_moved():
     assert table[3] == "| version 2 | 1 | 0 | 1 | 1 | 0 | 0 | 1 |"
     assert table[5] == "| version 4 | 0 | 1 | 1 | 1 | 0 | 0 | 1 |"
     assert ledger.version_table([]) == ""
+
+
+def test_a_central_sentence_says_which_version_of_the_procedures_moved_it():
+    row = ledger.LedgerRow("demo", "k", "the filter converges", "abstract", "", "", "artefact",
+                           "", central=True, procedure="population-rate", headline=True,
+                           by_version={1: "reproduced", 2: "reproduced", 3: "artefact",
+                                       4: "artefact"})
+    assert ledger.central_claims([row]).endswith(
+        "It read reproduced under version 2 of the decision procedures; version 3 changed it "
+        "(the table of versions).\n")
+    still = dataclasses.replace(row, verdict="differs", by_version={1: "differs", 2: "differs"})
+    assert "It read" not in ledger.central_claims([still])
+
+
+def test_the_headline_counts_a_declared_attainable_as_attainable():
+    rows = [ledger.LedgerRow("demo", "a", "c", "s", "", "", "attainable", "", group="a",
+                             procedure="population-rate", headline=True),
+            ledger.LedgerRow("demo", "b", "c", "s", "", "", "reproduced", "", group="b",
+                             procedure="population-rate", headline=True)]
+    assert ledger.headline(rows) == "2 claims of the paper's methods: 1 reproduced, 1 attainable"
