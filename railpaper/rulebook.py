@@ -320,7 +320,7 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
     *reproduced* becomes an *artefact* when the Clopper–Pearson interval of ``sound / n`` lies
     wholly below ``threshold``: the claimed number (a convergence step, an error, a gain) comes
     from a filter that misses the exact posterior on most records.  Every other verdict, and a
-    sound estimator's, is returned as it is.  Only studies whose records have their exact
+    sound estimator's, keeps its verdict (a passed check says so in the reason).  Only studies whose records have their exact
     posterior carry the columns this reads (chapter 004's in the filters' own rows; chapter
     003's joined from its posterior studies); which estimators a row is checked against is the
     caller's (:func:`railpaper.pipeline.declarations.estimators_credited`, version 3).
@@ -333,8 +333,11 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
     if decision.verdict != "reproduced":
         return decision
     low, high = clopper_pearson(sound, n, level)
-    if high >= threshold:
-        return decision
+    if high >= threshold:                       # checked and passed: the reason says so
+        return dataclasses.replace(decision, reason=(
+            f"{decision.reason}; the {estimator} ends within two exact-posterior standard "
+            f"deviations of the exact posterior mean on {sound}/{n} of these records "
+            f"[{low:.3g}, {high:.3g}], not wholly below {threshold:g}: checked"))
     return dataclasses.replace(decision, verdict="artefact", reason=(
         f"{decision.reason}; but the {estimator} ends within two exact-posterior standard "
         f"deviations of the exact posterior mean on only {sound}/{n} of these records "

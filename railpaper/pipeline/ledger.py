@@ -712,7 +712,8 @@ def ledger_markdown(rows: list[LedgerRow], titles: dict[str, str] | None = None)
 VERDICT_SENTENCES = {
     "reproduced": "holds on our evidence",
     "attainable": "holds only with a method or design that is not the paper's",
-    "artefact": "holds only as an artefact of how the paper computed it",
+    "artefact": ("holds only as an artefact: the numbers come from our build of the paper's "
+                 "estimator, which misses what the data say (the exact posterior)"),
     "differs": "does not hold on our evidence",
     "undecided": "cannot be decided yet: our evidence is not enough either way",
     "not testable": "cannot be tested: the paper gives nothing to test it against",
@@ -794,20 +795,20 @@ def central_claims_page(rows: list[LedgerRow], titles: dict[str, str],
 def version_table(rows: list[LedgerRow]) -> str:
     """Markdown: every declared row's verdict counted under each version of the decision
     procedures, on the same declarations, sizes and evidence, so that what each version changed
-    is computed, not typed."""
+    is computed, not typed (``moved``: rows whose verdict differs from the version before)."""
     declared = [r for r in rows if r.by_version]
     if not declared:
         return ""
     versions = sorted({v for r in declared for v in r.by_version})
     shown = [v for v in RULE_VERDICTS]
-    lines = ["| procedures | " + " | ".join(shown) + " | rows that moved from the version "
-             "before |", "|---|" + "---|" * (len(shown) + 1)]
+    lines = ["| version | " + " | ".join(shown) + " | moved |",
+             "|---|" + "---:|" * (len(shown) + 1)]
     for version in versions:
         counts = [sum(r.by_version.get(version) == v for r in declared) for v in shown]
         moved = ("—" if version == versions[0] else
                  str(sum(r.by_version.get(version) != r.by_version.get(version - 1)
                          for r in declared)))
-        lines.append(f"| version {version} | " + " | ".join(map(str, counts)) + f" | {moved} |")
+        lines.append(f"| {version} | " + " | ".join(map(str, counts)) + f" | {moved} |")
     return "\n".join(lines) + "\n"
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from railpaper.experiments.rbpf_parameter_estimation import STUDIES
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, toy
+from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, soundness, toy
 from railpaper.experiments.records import assert_chunk_invariant
 from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
 
@@ -36,11 +36,13 @@ def small_run():
 
 def test_the_chapter_exposes_its_studies():
     assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme",
-                                         "lateral_ekf", "model_error"]
+                                         "lateral_ekf", "model_error", "toy_posterior",
+                                         "lateral_posterior"]
 
 
 @pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME, lateral.EKF,
-                                   mismatch.MODEL_ERROR])
+                                   mismatch.MODEL_ERROR, soundness.TOY_POSTERIOR,
+                                   soundness.LATERAL_POSTERIOR])
 def test_a_record_does_not_depend_on_its_chunk(study):
     assert_chunk_invariant(study, small(), [4, 2])
 
@@ -100,3 +102,36 @@ def test_the_rows_kept_by_the_run_are_the_study_s_rows(study, table, small_run):
     kept = small_run.extra_tables[table]
     pd.testing.assert_frame_equal(kept, study.rows(settings, tuple(kept.seed)).pipe(
         lambda frame: frame[kept.columns]).astype(kept.dtypes.to_dict()), check_exact=True)
+
+
+def test_soundness_columns_by_hand():
+    # toy: truth (-0.4, 0.5, 0.5, 1); record 0's RBPF ends 0.1 off in x1 where the posterior sd
+    # is 0.04 (|z| = 2.5 > 2: not sound), record 1 exactly at the posterior mean; the EKF of
+    # record 1 diverged (NaN: not sound); record 2 has no posterior (NaN: not known)
+    settings = small()
+    rows = pd.DataFrame({"seed": [0, 1, 2]})
+    for m in ("rbpf", "ekf"):
+        for ic in (1, 2):
+            for j in range(1, 5):
+                rows[f"{m}_final_error_x{j}_init{ic}"] = 0.0
+    rows.loc[0, "rbpf_final_error_x1_init1"] = 0.1
+    rows.loc[1, "ekf_final_error_x3_init2"] = np.nan
+    posterior = pd.DataFrame({"seed": [0, 1]})
+    truth = toy.truth(settings)
+    for ic in (1, 2):
+        for j in range(1, 5):
+            posterior[f"posterior_mean_x{j}_init{ic}"] = truth[j - 1]
+            posterior[f"posterior_sd_x{j}_init{ic}"] = 0.04
+    out = soundness.soundness_columns("toy", rows, posterior, settings)
+    np.testing.assert_array_equal(out.satisfactory_rbpf_init1, [0.0, 1.0, np.nan])
+    np.testing.assert_array_equal(out.satisfactory_rbpf_both_inits, [0.0, 1.0, np.nan])
+    np.testing.assert_array_equal(out.satisfactory_ekf_init2, [1.0, 0.0, np.nan])
+    np.testing.assert_array_equal(out.satisfactory_ekf_both_inits, [1.0, 0.0, np.nan])
+    # lateral: estimate 1 + relative error against the normalised posterior; no posterior at all
+    lateral_rows = pd.DataFrame({"seed": [5], **{f"final_relative_error_{p}": [0.01]
+                                                 for p in ("csy", "lambda", "kpy", "ksy",
+                                                           "csaly")}})
+    unknown = soundness.soundness_columns("lateral_paper_scheme", lateral_rows, None, settings)
+    assert np.isnan(unknown.satisfactory.iloc[0])
+    with pytest.raises(ValueError, match="has no exact posterior"):
+        soundness.soundness_columns("model_error", lateral_rows, None, settings)
