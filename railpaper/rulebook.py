@@ -20,6 +20,7 @@ threshold of a claim's own.
   and rates; :func:`cost_ratio` — a time ratio or share measured on this machine;
 * :func:`attainable` (procedure version 4) — a *reproduced* read off a method that is not the
   paper's (declared blind per reading, ``data/<chapter>/methods.toml``) is *attainable*;
+  :func:`not_the_papers` (version 5) also makes a *differs* there *not testable*;
 * :func:`soundness` (procedure version 2; version 3 applies it only to the estimators a row
   credits) — a *reproduced* read off an estimator that misses the exact posterior on most of
   the same records is an *artefact*.
@@ -361,6 +362,25 @@ def attainable(decision: Decision, why: str) -> Decision:
         return decision
     return dataclasses.replace(decision, verdict="attainable", reason=(
         f"{decision.reason}; but the numbers come from a method that is not the paper's ({why})"))
+
+
+def not_the_papers(decision: Decision, why: str) -> Decision:
+    """A verdict read off a method or design that is not the paper's (procedure version 5,
+    symmetric to :func:`attainable`): a *reproduced* becomes *attainable*, and a *differs*
+    becomes *not testable* — our method failing to show a claim says nothing about the paper's
+    method, just as its showing it proves nothing for the paper.  Every other verdict is
+    returned as it is.
+
+    >>> not_the_papers(Decision("differs", "settles at step 40"), "our observer").verdict
+    'not testable'
+    >>> not_the_papers(Decision("reproduced", "settles at step 4"), "our observer").verdict
+    'attainable'
+    """
+    if decision.verdict == "differs":
+        return dataclasses.replace(decision, verdict="not testable", reason=(
+            f"{decision.reason}; but the numbers come from a method that is not the paper's "
+            f"({why}): that it does not show the claim says nothing about the paper's method"))
+    return attainable(decision, why)
 
 
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:

@@ -222,6 +222,9 @@ def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | No
                "procedure_version": vocabulary.policy["procedure_version"], "size": size}
     if vocabulary.policy["procedure_version"] >= 4:     # whose method the reading is
         payload["method_not_the_papers"] = method_not_the_papers(declaration)
+    if vocabulary.policy["procedure_version"] >= 5:     # ... and whether it is a yardstick
+        payload["yardstick"] = bool({declaration.id, declaration.reading or AS_STATED}
+                                    & chapter_yardsticks(declaration.chapter))
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -337,6 +340,18 @@ def chapter_methods(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
     return {reading: why[reading] for reading in table.get("ours", [])}
 
 
+@functools.lru_cache(maxsize=16)
+def chapter_yardsticks(chapter: str, data_dir: Path = DATA_DIR) -> frozenset[str]:
+    """The readings (or row ids) of the chapter's methods file listed as a ``yardstick``: not a
+    competing method but a computation of what the data allow (the exact posterior), whose
+    failure to show a claim bears on every estimator (declared blind,
+    ``data/blind/yardstick_brief.md``)."""
+    path = Path(data_dir) / chapter / METHODS_FILE
+    if not path.exists():
+        return frozenset()
+    return frozenset(tomllib.loads(path.read_text()).get("yardstick", []))
+
+
 def method_not_the_papers(d: Declaration, methods: dict[str, str] | None = None) -> str:
     """Why the row's numbers come from a method that is not the paper's ('' when they come from
     the paper's own): its id, else its reading (``as stated`` when it has none), looked up in
@@ -350,17 +365,28 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
            metrics: dict[str, Any], size: int | None = None,
            procedure_version: int | None = None,
            estimator_of: Callable[[str], str | None] | None = None,
-           methods: dict[str, str] | None = None) -> Decision:
+           methods: dict[str, str] | None = None,
+           yardsticks: frozenset[str] | None = None) -> Decision:
     """The row's verdict by its class's procedure (:func:`decide_procedure`); from version 4 a
     *reproduced* whose numbers come from a method that is not the paper's (``methods``: the
     chapter's :func:`chapter_methods` by default) is *attainable*
-    (:func:`railpaper.rulebook.attainable`)."""
+    (:func:`railpaper.rulebook.attainable`), and from version 5 a *differs* there is *not
+    testable* (:func:`railpaper.rulebook.not_the_papers`) unless the reading is a yardstick
+    (``yardsticks``: the chapter's :func:`chapter_yardsticks` by default), whose failure bears
+    on every estimator and stays *differs*."""
     version = (vocabulary.policy["procedure_version"] if procedure_version is None
                else procedure_version)
     decision = decide_procedure(declaration, vocabulary, rows, metrics, size, version,
                                 estimator_of)
     why = method_not_the_papers(declaration, methods) if version >= 4 else ""
-    return rulebook.attainable(decision, why) if why else decision
+    if not why:
+        return decision
+    yardsticks = chapter_yardsticks(declaration.chapter) if yardsticks is None else yardsticks
+    competing = (declaration.id not in yardsticks
+                 and (declaration.reading or AS_STATED) not in yardsticks)
+    if version >= 5 and competing:
+        return rulebook.not_the_papers(decision, why)
+    return rulebook.attainable(decision, why)
 
 
 def decide_procedure(declaration: Declaration, vocabulary: Vocabulary,
@@ -583,7 +609,7 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "chapter_methods", "decide", "decide_procedure", "estimators_credited",
+           "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure", "estimators_credited",
            "estimators_read", "fingerprint", "first_records", "load_declarations",
            "load_registry", "method_not_the_papers", "parse", "procedure_reregistrations", "register", "registered_size",
            "revisions", "soundness_column", "write_registry"]

@@ -72,7 +72,7 @@ def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size()
     other_class = copy.deepcopy(VOCABULARY)
     other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
     assert fingerprint(d, other_class, 785) == base
-    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=5))
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=6))
     assert fingerprint(d, newer, 785) != base
 
 
@@ -403,7 +403,32 @@ def test_a_methods_file_needs_a_reason_for_every_reading_it_calls_ours(tmp_path)
     (tmp_path / "demo" / "methods.toml").write_text(
         'ours = ["hb0"]\npaper = ["labels"]\n[why]\nhb0 = "a variant of ours"\n')
     assert declarations.chapter_methods("demo", tmp_path) == {"hb0": "a variant of ours"}
+    assert declarations.chapter_yardsticks("demo", tmp_path) == frozenset()
+    (tmp_path / "exact").mkdir()
+    (tmp_path / "exact" / "methods.toml").write_text(
+        'ours = ["printed"]\nyardstick = ["printed"]\n[why]\nprinted = "the exact posterior"\n')
+    assert declarations.chapter_yardsticks("exact", tmp_path) == frozenset({"printed"})
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "methods.toml").write_text('ours = ["hb0"]\n')
     with pytest.raises(DataError, match="'hb0' is listed as ours without a 'why'"):
         declarations.chapter_methods("other", tmp_path)
+
+
+def test_version_5_makes_a_differs_from_our_method_not_testable():
+    rows = _toy_like_rows()
+    methods = {"working_scheme": "our tempered RBPF"}
+    fails = declaration(metrics=["ekf_converged_init1"], study="toy", reading="working_scheme",
+                        **MAJORITY)
+    assert decide(fails, VOCABULARY, rows, {}, procedure_version=4, methods=methods
+                  ).verdict == "differs"
+    fifth = decide(fails, VOCABULARY, rows, {}, procedure_version=5, methods=methods)
+    assert fifth.verdict == "not testable" and "says nothing about the paper's" in fifth.reason
+    holds = dataclasses.replace(fails, metrics=("rbpf_converged_init1",))
+    assert decide(holds, VOCABULARY, rows, {}, procedure_version=5, methods=methods
+                  ).verdict == "attainable"
+    paper = dataclasses.replace(fails, reading="")
+    assert decide(paper, VOCABULARY, rows, {}, procedure_version=5, methods=methods
+                  ).verdict == "differs"
+    # a yardstick's failure (the exact posterior) bears on every estimator: it stays differs
+    assert decide(fails, VOCABULARY, rows, {}, procedure_version=5, methods=methods,
+                  yardsticks=frozenset({"working_scheme"})).verdict == "differs"
