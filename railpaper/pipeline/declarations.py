@@ -216,7 +216,8 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
 def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | None) -> str:
     """SHA-256 (first 16 hex digits) of the canonical declaration, the vocabulary entries it
     reads, the procedures' version, the registered size and (from version 4) whether its
-    reading's method is not the paper's (:func:`method_not_the_papers`)."""
+    reading's method is not the paper's (:func:`method_not_the_papers`) and (from version 5)
+    whether that reading is a yardstick (:func:`chapter_yardsticks`)."""
     payload = {"declaration": declaration.canonical(),
                "vocabulary": vocabulary_entries(declaration, vocabulary),
                "procedure_version": vocabulary.policy["procedure_version"], "size": size}

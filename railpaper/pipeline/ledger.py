@@ -794,21 +794,21 @@ def central_claims_page(rows: list[LedgerRow], titles: dict[str, str],
 
 def version_table(rows: list[LedgerRow]) -> str:
     """Markdown: every declared row's verdict counted under each version of the decision
-    procedures, on the same declarations, sizes and evidence, so that what each version changed
-    is computed, not typed (``moved``: rows whose verdict differs from the version before)."""
+    procedures (one column per version), on the same declarations, sizes and evidence, so that
+    what each version changed is computed, not typed; the last line counts the rows whose
+    verdict differs from the version before."""
     declared = [r for r in rows if r.by_version]
     if not declared:
         return ""
     versions = sorted({v for r in declared for v in r.by_version})
-    shown = [v for v in RULE_VERDICTS]
-    lines = ["| version | " + " | ".join(shown) + " | moved |",
-             "|---|" + "---:|" * (len(shown) + 1)]
-    for version in versions:
-        counts = [sum(r.by_version.get(version) == v for r in declared) for v in shown]
-        moved = ("—" if version == versions[0] else
-                 str(sum(r.by_version.get(version) != r.by_version.get(version - 1)
-                         for r in declared)))
-        lines.append(f"| {version} | " + " | ".join(map(str, counts)) + f" | {moved} |")
+    lines = ["| verdict | " + " | ".join(f"v{v}" for v in versions) + " |",
+             "|---|" + "---:|" * len(versions)]
+    for verdict in RULE_VERDICTS:
+        counts = [sum(r.by_version.get(v) == verdict for r in declared) for v in versions]
+        lines.append(f"| {verdict} | " + " | ".join(map(str, counts)) + " |")
+    moved = ["—"] + [str(sum(r.by_version.get(v) != r.by_version.get(v - 1) for r in declared))
+                     for v in versions[1:]]
+    lines.append("| *moved* | " + " | ".join(moved) + " |")
     return "\n".join(lines) + "\n"
 
 
