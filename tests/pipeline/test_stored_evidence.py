@@ -21,6 +21,15 @@ STORED = sorted((path.parent.name, study) for path in DECISIVE_DIR.glob("*/prove
                 for study in json.loads(path.read_text())["studies"])
 
 
+#: CPU seconds per stored record above which the spot check recomputes one record, not two.
+EXPENSIVE_CPU_S = 1.5
+
+
+def _cpu_s_per_record(chapter: str, study: str) -> float:
+    entry = json.loads((DECISIVE_DIR / chapter / "provenance.json").read_text())["studies"][study]
+    return entry["cpu_s"] / entry["records"]
+
+
 def test_there_is_stored_evidence_to_check():
     assert STORED, f"no decisive evidence under {DECISIVE_DIR}"
 
@@ -34,9 +43,12 @@ def test_stored_records_are_reproduced_bit_for_bit(chapter, study):
     # "(this checkout)" is no commit: every stored row counts as another commit's, so the
     # store's own spot check recomputes two drawn rows and raises, in one line naming the folder
     # and 'railpaper evidence', if any bit differs
+    # two drawn records, or one where a record costs more than EXPENSIVE_CPU_S (the lateral
+    # exact posterior: about 2 CPU-s a record)
+    n_records = 1 if _cpu_s_per_record(chapter, study) > EXPENSIVE_CPU_S else 2
     checked = store.verify(chapter_studies(chapter)[study], settings, rows, "(this checkout)",
-                           n_records=2)
-    assert len(checked) == 2
+                           n_records=n_records)
+    assert len(checked) == n_records
 
 
 @pytest.mark.parametrize("chapter", sorted({chapter for chapter, _ in STORED}))
