@@ -738,18 +738,22 @@ CONTEXT_FILE = "context.toml"
 
 def context_sentences(chapter: str, run: dict | None, data_dir: Path = DATA_DIR) -> str:
     """The chapter's context sentences (``[[context]]`` tables: ``text`` with ``{name}``
-    fields, and ``[context.values]`` naming each field's ``metric`` and ``scale``), filled from
-    the run's metrics; a sentence whose metric the run lacks is left out."""
+    fields, and ``[context.values]`` naming each field's ``metric`` or run ``parameter`` (a
+    list is written comma-separated) and ``scale``), filled from the run; a sentence whose
+    value the run lacks is left out."""
     path = Path(data_dir) / chapter / CONTEXT_FILE
     if run is None or not path.exists():
         return ""
-    metrics, lines = run.get("metrics", {}), []
+    metrics, parameters, lines = run.get("metrics", {}), run.get("parameters", {}), []
     for entry in read_toml(path).get("context", []):
-        values = {name: metrics.get(spec["metric"]) for name, spec in entry["values"].items()}
+        values = {name: (metrics.get(spec["metric"]) if "metric" in spec
+                         else parameters.get(spec["parameter"]))
+                  for name, spec in entry["values"].items()}
         if any(v is None for v in values.values()):
             continue
-        scaled = {name: float(values[name]) * spec.get("scale", 1.0)
-                  for name, spec in entry["values"].items()}
+        scaled = {name: (", ".join(f"{float(x) * spec.get('scale', 1.0):g}" for x in value)
+                         if isinstance(value, list) else float(value) * spec.get("scale", 1.0))
+                  for (name, spec), value in zip(entry["values"].items(), values.values())}
         lines.append(f"- *Context (ours, not a claim of the paper's):* "
                      f"{' '.join(entry['text'].split()).format(**scaled)}")
     return "\n".join(lines) + "\n" if lines else ""

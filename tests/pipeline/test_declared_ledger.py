@@ -131,3 +131,12 @@ def test_the_headline_counts_a_declared_attainable_as_attainable():
             ledger.LedgerRow("demo", "b", "c", "s", "", "", "reproduced", "", group="b",
                              procedure="population-rate", headline=True)]
     assert ledger.headline(rows) == "2 claims of the paper's methods: 1 reproduced, 1 attainable"
+
+
+def test_a_context_sentence_can_read_a_run_parameter(tmp_path):
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "context.toml").write_text(
+        '[[context]]\ntext = "Poles {poles} 1/s."\n[context.values]\n'
+        'poles = { parameter = "observer_poles" }\n')
+    run = {"metrics": {}, "parameters": {"observer_poles": [-30.0, -40.0]}}
+    assert ledger.context_sentences("demo", run, tmp_path).endswith("Poles -30, -40 1/s.\n")
