@@ -716,7 +716,8 @@ VERDICT_SENTENCES = {
                  "estimator, which misses what the data say (the exact posterior)"),
     "differs": "does not hold on our evidence",
     "undecided": "cannot be decided yet: our evidence is not enough either way",
-    "not testable": "cannot be tested: the paper gives nothing to test it against",
+    "not testable": ("cannot be tested on the paper's own method: it cannot be run as printed, "
+                     "or the paper gives nothing to test it against"),
     "missing": "has not been judged: the chapter has not been run",
 }
 
