@@ -610,7 +610,8 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure", "estimators_credited",
-           "estimators_read", "fingerprint", "first_records", "load_declarations",
-           "load_registry", "method_not_the_papers", "parse", "procedure_reregistrations", "register", "registered_size",
-           "revisions", "soundness_column", "write_registry"]
+           "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure",
+           "estimators_credited", "estimators_read", "fingerprint", "first_records",
+           "load_declarations", "load_registry", "method_not_the_papers", "parse",
+           "procedure_reregistrations", "register", "registered_size", "revisions",
+           "soundness_column", "write_registry"]

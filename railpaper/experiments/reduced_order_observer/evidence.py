@@ -113,7 +113,7 @@ def _reading_samples(reading, settings: Settings, t_s, q, noise_y, noise_q, refe
     fixed = (noise_y[:, reference], noise_q[:, reference], rms_y[reference], rms_q[reference])
     for noise, draws in (("", (noise_y, noise_q, rms_y, rms_q)), ("_fixed_noise", fixed),
                          (NOISE_AS_PRINTED, None)):
-        if draws is None:          # D as printed: noise on Z_w alone, which the observer never reads
+        if draws is None:          # D as printed: noise on Z_w alone, never read by the observer
             y_meas, q_meas = y, q
         else:
             draw_y, draw_q, sigma_y, sigma_q = draws
