@@ -69,7 +69,7 @@ VERDICT_ICONS = {"reproduced": "✔", "attainable": "◇", "artefact": "⚠", "d
 CSV_COLUMNS = ["chapter", "claim", "reading", "kind", "method", "headline", "paper_value", "ours",
                "ours_low", "ours_high", "n_samples", "min_samples", "verdict", "reason",
                "revised_after_evidence", "verdict_under_original_rule", "procedure", "words",
-               "horizon", "central", "fingerprint", "evidence"]
+               "horizon", "central", "fingerprint", "evidence", "verdicts_by_procedure_version"]
 
 
 @dataclass
@@ -840,7 +840,9 @@ def write_ledger_csv(rows: list[LedgerRow], path: str | Path) -> Path:
                              "" if r.min_samples is None else r.min_samples,
                              r.verdict, r.reason, r.revised, r.original_verdict,
                              r.procedure or "v2 rule", r.words, r.horizon,
-                             str(r.central).lower(), r.fingerprint, r.evidence])
+                             str(r.central).lower(), r.fingerprint, r.evidence,
+                             "; ".join(f"v{v} {verdict}"
+                                       for v, verdict in sorted(r.by_version.items()))])
     return path
 
 

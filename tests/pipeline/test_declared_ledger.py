@@ -140,3 +140,12 @@ def test_a_context_sentence_can_read_a_run_parameter(tmp_path):
         'poles = { parameter = "observer_poles" }\n')
     run = {"metrics": {}, "parameters": {"observer_poles": [-30.0, -40.0]}}
     assert ledger.context_sentences("demo", run, tmp_path).endswith("Poles -30, -40 1/s.\n")
+
+
+def test_the_csv_gives_each_row_s_verdict_under_every_version(tmp_path):
+    row = ledger.LedgerRow("demo", "k", "c", "s", "", "", "attainable", "", procedure="x",
+                           by_version={2: "reproduced", 1: "reproduced", 4: "attainable"})
+    path = ledger.write_ledger_csv([row], tmp_path / "ledger.csv")
+    with path.open() as handle:
+        table = list(csv.DictReader(handle))
+    assert table[0]["verdicts_by_procedure_version"] == "v1 reproduced; v2 reproduced; v4 attainable"
