@@ -224,8 +224,7 @@ def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | No
     if vocabulary.policy["procedure_version"] >= 4:     # whose method the reading is
         payload["method_not_the_papers"] = method_not_the_papers(declaration)
     if vocabulary.policy["procedure_version"] >= 5:     # ... and whether it is a yardstick
-        payload["yardstick"] = bool({declaration.id, declaration.reading or AS_STATED}
-                                    & chapter_yardsticks(declaration.chapter))
+        payload["yardstick"] = is_yardstick(declaration)
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -327,30 +326,30 @@ AS_STATED = "as stated"
 
 
 @functools.lru_cache(maxsize=16)
+def _methods_table(chapter: str, data_dir: Path) -> dict[str, Any]:
+    """The chapter's parsed methods file (empty without one), read once."""
+    path = Path(data_dir) / chapter / METHODS_FILE
+    return tomllib.loads(path.read_text()) if path.exists() else {}
+
+
 def chapter_methods(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
     """``{reading: why}`` of the chapter's readings whose method is not the paper's (empty
     without a methods file)."""
-    path = Path(data_dir) / chapter / METHODS_FILE
-    if not path.exists():
-        return {}
-    table = tomllib.loads(path.read_text())
+    table = _methods_table(chapter, Path(data_dir))
     why = table.get("why", {})
     missing = [r for r in table.get("ours", []) if r not in why]
     if missing:
-        raise DataError(f"{path}: reading {missing[0]!r} is listed as ours without a 'why'")
+        raise DataError(f"{Path(data_dir) / chapter / METHODS_FILE}: reading {missing[0]!r} is "
+                        "listed as ours without a 'why'")
     return {reading: why[reading] for reading in table.get("ours", [])}
 
 
-@functools.lru_cache(maxsize=16)
 def chapter_yardsticks(chapter: str, data_dir: Path = DATA_DIR) -> frozenset[str]:
     """The readings (or row ids) of the chapter's methods file listed as a ``yardstick``: not a
     competing method but a computation of what the data allow (the exact posterior), whose
     failure to show a claim bears on every estimator (declared blind,
     ``data/blind/yardstick_brief.md``)."""
-    path = Path(data_dir) / chapter / METHODS_FILE
-    if not path.exists():
-        return frozenset()
-    return frozenset(tomllib.loads(path.read_text()).get("yardstick", []))
+    return frozenset(_methods_table(chapter, Path(data_dir)).get("yardstick", []))
 
 
 def method_not_the_papers(d: Declaration, methods: dict[str, str] | None = None) -> str:
@@ -360,6 +359,13 @@ def method_not_the_papers(d: Declaration, methods: dict[str, str] | None = None)
     readings, and row ids where one row of a reading differs from the rest)."""
     methods = chapter_methods(d.chapter) if methods is None else methods
     return methods.get(d.id) or methods.get(d.reading or AS_STATED, "")
+
+
+def is_yardstick(d: Declaration, yardsticks: frozenset[str] | None = None) -> bool:
+    """Whether the row's id or reading is a yardstick (``yardsticks``: the chapter's
+    :func:`chapter_yardsticks` by default)."""
+    yardsticks = chapter_yardsticks(d.chapter) if yardsticks is None else yardsticks
+    return bool({d.id, d.reading or AS_STATED} & yardsticks)
 
 
 def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame | None,
@@ -382,10 +388,7 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
     why = method_not_the_papers(declaration, methods) if version >= 4 else ""
     if not why:
         return decision
-    yardsticks = chapter_yardsticks(declaration.chapter) if yardsticks is None else yardsticks
-    competing = (declaration.id not in yardsticks
-                 and (declaration.reading or AS_STATED) not in yardsticks)
-    if version >= 5 and competing:
+    if version >= 5 and not is_yardstick(declaration, yardsticks):
         return rulebook.not_the_papers(decision, why)
     return rulebook.attainable(decision, why)
 
@@ -611,7 +614,7 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
            "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure",
-           "estimators_credited", "estimators_read", "fingerprint", "first_records",
+           "estimators_credited", "estimators_read", "fingerprint", "first_records", "is_yardstick",
            "load_declarations", "load_registry", "method_not_the_papers", "parse",
            "procedure_reregistrations", "register", "registered_size", "revisions",
            "soundness_column", "write_registry"]
