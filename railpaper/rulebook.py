@@ -321,10 +321,11 @@ def soundness(decision: Decision, estimator: str, sound: int, n: int, threshold:
     *reproduced* becomes an *artefact* when the Clopper–Pearson interval of ``sound / n`` lies
     wholly below ``threshold``: the claimed number (a convergence step, an error, a gain) comes
     from a filter that misses the exact posterior on most records.  Every other verdict, and a
-    sound estimator's, keeps its verdict (a passed check says so in the reason).  Only studies whose records have their exact
-    posterior carry the columns this reads (chapter 004's in the filters' own rows; chapter
-    003's joined from its posterior studies); which estimators a row is checked against is the
-    caller's (:func:`railpaper.pipeline.declarations.estimators_credited`, version 3).
+    sound estimator's, keeps its verdict (a passed check says so in the reason).  Only studies
+    whose records have their exact posterior carry the columns this reads (chapter 004's in the
+    filters' own rows; chapter 003's joined from its posterior studies); which estimators a row
+    is checked against is the caller's
+    (:func:`railpaper.pipeline.declarations.estimators_credited`, version 3).
 
     >>> soundness(Decision("reproduced", "settles at step 4"), "qgrbpf", 8, 150).verdict
     'artefact'

@@ -355,9 +355,10 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
             catalogue = estimator_catalogue(chapter, d.study)
             decision, verdict = decide(d, vocabulary, table, values, size,
                                        estimator_of=catalogue), ""
+            current = vocabulary.policy["procedure_version"]
             by_version = {version: _verdict_under(d, vocabulary, table, values, size, version,
-                                                  catalogue)
-                          for version in range(1, vocabulary.policy["procedure_version"] + 1)}
+                                                  catalogue) for version in range(1, current)}
+            by_version[current] = decision.verdict          # decided just above
             decision = _with_cost(decision, chapter, d.study, size, table)
         verdict = verdict or decision.verdict
         paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
@@ -747,16 +748,18 @@ def context_sentences(chapter: str, run: dict | None, data_dir: Path = DATA_DIR)
         return ""
     metrics, parameters, lines = run.get("metrics", {}), run.get("parameters", {}), []
     for entry in read_toml(path).get("context", []):
-        values = {name: (metrics.get(spec["metric"]) if "metric" in spec
-                         else parameters.get(spec["parameter"]))
-                  for name, spec in entry["values"].items()}
-        if any(v is None for v in values.values()):
-            continue
-        scaled = {name: (", ".join(f"{float(x) * spec.get('scale', 1.0):g}" for x in value)
-                         if isinstance(value, list) else float(value) * spec.get("scale", 1.0))
-                  for (name, spec), value in zip(entry["values"].items(), values.values())}
-        lines.append(f"- *Context (ours, not a claim of the paper's):* "
-                     f"{' '.join(entry['text'].split()).format(**scaled)}")
+        fields = {}
+        for name, spec in entry["values"].items():
+            value = (metrics.get(spec["metric"]) if "metric" in spec
+                     else parameters.get(spec["parameter"]))
+            if value is None:
+                break
+            scale = spec.get("scale", 1.0)
+            fields[name] = (", ".join(f"{float(x) * scale:g}" for x in value)
+                            if isinstance(value, list) else float(value) * scale)
+        else:
+            lines.append(f"- *Context (ours, not a claim of the paper's):* "
+                         f"{' '.join(entry['text'].split()).format(**fields)}")
     return "\n".join(lines) + "\n" if lines else ""
 
 
