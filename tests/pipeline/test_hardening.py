@@ -428,6 +428,18 @@ def test_second_run_of_the_same_chapter_is_refused(runs):
     assert not list(out.parent.glob(".run.staging-*"))
 
 
+def test_run_page_marks_non_default_parameters(runs):
+    """The first run's page (a whole ``railpaper run`` with ``-p``) names its non-default
+    parameters above the claims it judged (the run page's own tests: test_run_page.py)."""
+    out = runs["out"]
+    assert json.loads((out / "metrics.json").read_text())["parameters"]["duration_s"] == 4
+    assert (out / "index.html").exists()
+    text = (out / "page" / "reduced_order_observer.html").read_text()
+    assert "Non-default parameters: " in text
+    for name in ("duration_s", "mc_seeds", "speeds_kmh"):
+        assert name in text.split("Non-default parameters: ")[1].split(".")[0], name
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_interrupted_run_keeps_previous_outputs(runs, signum):
     r = runs["interrupted"][signum]

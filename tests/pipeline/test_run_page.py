@@ -1,12 +1,10 @@
 """A run is something to read: `railpaper run` writes DIR/index.html, the executed chapter as a
 web page with its figures, typeset math and the claims judged on this run."""
 
-import json
 import re
 import shutil
 
 import pytest
-from conftest import railpaper_cli
 from test_book import rendered_dom
 
 from railpaper.pipeline.chapters import chapter_spec
@@ -14,8 +12,6 @@ from railpaper.pipeline.page import render_run_page
 
 pytestmark = pytest.mark.slow
 CHAPTER = "partial-state-observer"
-#: The cheapest chapter, for the run that goes through the whole command.
-CHEAP_CHAPTER = "reduced-order-observer"
 
 
 @pytest.fixture(scope="module")
@@ -43,14 +39,3 @@ def test_run_page_renders_offline(run_with_page, tmp_path):
     assert dom.count("<mjx-container") >= 1
     for src in re.findall(r'<img[^>]+src="([^"]+)"', dom):
         assert (page.parent / src).resolve().exists(), src
-
-
-def test_run_page_marks_non_default_parameters(tmp_path):
-    out = tmp_path / "run"
-    result = railpaper_cli("run", CHEAP_CHAPTER, "--quick", "-p", "seed", "3", "--out", str(out))
-    assert result.returncode == 0, result.stderr[-2000:]
-    assert json.loads((out / "metrics.json").read_text())["parameters"]["seed"] == 3
-    assert (out / "index.html").exists()
-    html = next((out / "page").glob("*.html"), None)
-    text = (out / "page" / "reduced_order_observer.html").read_text()
-    assert html is not None and "Non-default parameters: seed." in text
