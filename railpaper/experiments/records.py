@@ -56,6 +56,9 @@ class RecordStudy:
     first_record : callable, optional
         ``first_record(settings)`` → the seed of the study's first record in the chapter's run
         (default: ``settings.seed``); a larger sample extends it with the seeds that follow.
+    repeats : str, optional
+        The name of the chapter's study whose rows this one computes under other settings (a
+        larger particle count): the same columns and the same compiled kernels.
     """
 
     chapter: str
@@ -63,6 +66,7 @@ class RecordStudy:
     rows: RowsFunction
     chunk_records: int = 1
     first_record: Callable[[Any], int] | None = None
+    repeats: str | None = None
 
     def first(self, settings: Any) -> int:
         """The seed of the study's first record under ``settings``."""

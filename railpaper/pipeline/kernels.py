@@ -32,8 +32,11 @@ FIRST = (("rbpf-parameter-estimation", "lateral_paper_scheme"),
 
 
 def kernel_tasks(chapters: list[str]) -> list[tuple[str, str]]:
-    """(chapter, study) for every per-record study of ``chapters``, :data:`FIRST` first."""
-    tasks = [(chapter, study) for chapter in chapters for study in chapter_studies(chapter)]
+    """(chapter, study) for every per-record study of ``chapters``, :data:`FIRST` first; a
+    study that repeats another under other settings (``RecordStudy.repeats``) compiles nothing
+    new and is left out."""
+    tasks = [(chapter, name) for chapter in chapters
+             for name, study in chapter_studies(chapter).items() if not study.repeats]
     return sorted(tasks, key=lambda task: task not in FIRST)
 
 

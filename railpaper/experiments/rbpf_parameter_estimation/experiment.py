@@ -53,7 +53,12 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     RbpfParameterEstimationResult,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import SPEC, Settings
-from railpaper.experiments.rbpf_parameter_estimation.toy import TOY, TOY_INITS, run_toy
+from railpaper.experiments.rbpf_parameter_estimation.toy import (
+    TOY,
+    TOY_INITS,
+    TOY_JUDGED,
+    run_toy,
+)
 from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
@@ -61,9 +66,12 @@ from railpaper.threads import one_thread
 #: The chapter's per-record studies: the toy's records; each lateral RBPF scheme's, the
 #: augmented EKF's (one guess) and the truth plant with model error.
 #: The exact posterior of the toy's and the lateral records (the soundness of the filters,
-#: :mod:`~railpaper.experiments.rbpf_parameter_estimation.soundness`) follows them.
+#: :mod:`~railpaper.experiments.rbpf_parameter_estimation.soundness`) follows them; then the
+#: toy and the paper-scheme RBPF at ``judged_particles``, which only the stored decisive
+#: evidence holds (a run does not compute them).
 STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR,
-           soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR)
+           soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR, TOY_JUDGED,
+           lateral.PAPER_SCHEME_JUDGED)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
 

@@ -225,6 +225,22 @@ WORKING_SCHEME = RecordStudy("rbpf-parameter-estimation", "lateral_working_schem
                              working_scheme_rows, chunk_records=1)
 
 
+def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`PAPER_SCHEME_JUDGED`'s rows: :func:`paper_scheme_rows` with
+    ``judged_particles`` particles in place of ``n_particles``."""
+    return paper_scheme_rows(settings.replace(n_particles=settings.judged_particles), seeds)
+
+
+#: The paper-scheme RBPF with ``judged_particles`` (1000) particles, the count at which the
+#: ledger judges the paper's RBPF (the paper prints none; blind policy,
+#: ``data/rbpf-parameter-estimation/blind/particles_reply.md``): one row per record, as
+#: :data:`PAPER_SCHEME`, which keeps our cheaper ``n_particles`` beside it.
+PAPER_SCHEME_JUDGED = RecordStudy("rbpf-parameter-estimation",
+                                  "lateral_paper_scheme_judged_particles",
+                                  judged_particles_rows, chunk_records=1,
+                                  repeats="lateral_paper_scheme")
+
+
 def ekf_row(seed: int, norm: np.ndarray) -> dict:
     """One record's row of the study :data:`EKF` from the first EKF guess's normalised estimates
     ``norm`` (K, 5; NaN after a divergence): ``ekf_converged`` (every final estimate within 5 %,
@@ -306,6 +322,11 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
             t0 = time.perf_counter()
             fr[scheme] = lateral_rbpf(settings, system, rec, theta, seed, scheme)
             spent[scheme] += time.perf_counter() - t0
+        if i == 0:          # the paper's RBPF at the count the ledger judges it (real time)
+            t0 = time.perf_counter()
+            lateral_rbpf(settings.replace(n_particles=settings.judged_particles), system, rec,
+                         theta, seed, "paper")
+            spent["paper_judged"] = time.perf_counter() - t0
         post = None
         if i < n_ibis:
             t0 = time.perf_counter()
@@ -358,6 +379,8 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
         # the records filtered here (the first n_records), RBPF alone: the rate it sustains
         timings[f"rbpf_{scheme}_per_run_s"] = spent[scheme] / n_records
         timings[f"steps_per_second_rbpf_{scheme}_scheme"] = n_steps * n_records / spent[scheme]
+    timings["steps_per_second_rbpf_paper_scheme_judged_particles"] = (n_steps
+                                                                      / spent["paper_judged"])
     timings["ibis_lateral_per_run_s"] = spent["ibis"] / n_ibis
     for field, suffix in (("rbpf_working_norm", ""), ("rbpf_paper_norm", "_paper_scheme")):
         norm = getattr(runs[0], field)                          # the illustrated record

@@ -32,7 +32,10 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.rbpf_parameter_estimation import toy
-from railpaper.experiments.rbpf_parameter_estimation.lateral import filtered_records
+from railpaper.experiments.rbpf_parameter_estimation.lateral import (
+    PAPER_SCHEME_JUDGED,
+    filtered_records,
+)
 from railpaper.experiments.rbpf_parameter_estimation.posterior import (
     lateral_posterior,
     toy_posterior,
@@ -94,7 +97,17 @@ LATERAL_POSTERIOR = RecordStudy(CHAPTER, "lateral_posterior", lateral_posterior_
 
 #: For each filters' study, the study holding its records' exact posterior.
 POSTERIOR_OF = {"toy": TOY_POSTERIOR, "lateral_paper_scheme": LATERAL_POSTERIOR,
-                "lateral_working_scheme": LATERAL_POSTERIOR}
+                "lateral_working_scheme": LATERAL_POSTERIOR,
+                toy.TOY_JUDGED.name: TOY_POSTERIOR, PAPER_SCHEME_JUDGED.name: LATERAL_POSTERIOR}
+#: A study run at ``judged_particles`` has the columns of the study it repeats.
+_SAME_COLUMNS_AS = {study.name: study.repeats
+                    for study in (toy.TOY_JUDGED, PAPER_SCHEME_JUDGED)}
+
+
+def _kind(study: str) -> str:
+    """The study whose columns ``study`` has (itself, or the one it repeats at another
+    particle count)."""
+    return _SAME_COLUMNS_AS.get(study, study)
 
 
 # ----------------------------------------------------------------------------- the columns
@@ -108,7 +121,7 @@ def _agrees(estimate: np.ndarray, mean: np.ndarray, sd: np.ndarray) -> np.ndarra
 
 def _posterior_columns(study: str) -> list[str]:
     """The columns of the posterior study of ``study``."""
-    if study == "toy":
+    if _kind(study) == "toy":
         return [f"posterior_{what}_x{j}_init{ic}" for ic in toy.TOY_INITS for j in range(1, 5)
                 for what in ("mean", "sd")]
     return [f"posterior_{what}_{p}" for p in lateral_16state.PARAM_NAMES
@@ -121,7 +134,7 @@ def soundness_columns(study: str, rows: pd.DataFrame, posterior: pd.DataFrame | 
     the ``posterior`` rows of the same seeds (a record without one, or every record when
     ``posterior`` is None, gets NaN: not known).
 
-    * ``toy``: ``satisfactory_<m>_init<ic>`` for m in ``rbpf`` (the paper scheme) and ``ekf``,
+    * ``toy`` (and ``toy_judged_particles``): ``satisfactory_<m>_init<ic>`` for m in ``rbpf`` (the paper scheme) and ``ekf``,
       from their final estimates (truth + ``<m>_final_error_x<j>_init<ic>``), and
       ``satisfactory_<m>_both_inits`` (both initial conditions);
     * ``lateral_*_scheme``: ``satisfactory`` (the study's one filter), from θ̂/θ = 1 +
@@ -140,7 +153,7 @@ def soundness_columns(study: str, rows: pd.DataFrame, posterior: pd.DataFrame | 
     def column(flags: np.ndarray) -> np.ndarray:
         return np.where(known, flags.astype(float), np.nan)
 
-    if study == "toy":
+    if _kind(study) == "toy":
         truth = toy.truth(settings)
         for m in TOY_ESTIMATORS:
             both = np.ones(len(rows), bool)
@@ -180,12 +193,12 @@ def estimator_of(study: str, column: str) -> str | None:
     >>> estimator_of("lateral_paper_scheme", "within_5pct_from_350")
     ''
     """
-    if study == "toy":
+    if _kind(study) == "toy":
         match = _TOY_COLUMN.match(column)
         if match is None or match.group(1) not in TOY_ESTIMATORS:
             return None
         return f"{match.group(1)}_{match.group(2)}"
-    if study in ("lateral_paper_scheme", "lateral_working_scheme"):
+    if _kind(study) in ("lateral_paper_scheme", "lateral_working_scheme"):
         return None if column == "seed" else ""
     return None
 

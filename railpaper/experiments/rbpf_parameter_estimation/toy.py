@@ -194,3 +194,17 @@ def run_toy(settings: Settings, record_map: RecordMap = map_in_process,
 
 #: The toy's per-record work: one wide row per seed (:func:`toy_rows`), a record at a time.
 TOY = RecordStudy("rbpf-parameter-estimation", "toy", toy_rows, chunk_records=10)
+
+
+def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`TOY_JUDGED`'s rows: :func:`toy_rows` with ``judged_particles`` RBPF
+    particles in place of ``toy_particles``."""
+    return toy_rows(settings.replace(toy_particles=settings.judged_particles), seeds)
+
+
+#: The toy's records with ``judged_particles`` (1000) RBPF particles, the count at which the
+#: ledger judges the paper's RBPF (blind policy,
+#: ``data/rbpf-parameter-estimation/blind/particles_reply.md``); :data:`TOY` keeps our cheaper
+#: ``toy_particles`` beside it.
+TOY_JUDGED = RecordStudy("rbpf-parameter-estimation", "toy_judged_particles",
+                         judged_particles_rows, chunk_records=10, repeats="toy")

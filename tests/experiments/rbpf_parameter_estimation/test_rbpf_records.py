@@ -37,7 +37,21 @@ def small_run():
 def test_the_chapter_exposes_its_studies():
     assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme",
                                          "lateral_ekf", "model_error", "toy_posterior",
-                                         "lateral_posterior"]
+                                         "lateral_posterior", "toy_judged_particles",
+                                         "lateral_paper_scheme_judged_particles"]
+
+
+@pytest.mark.parametrize("judged, parent, field", [
+    (toy.TOY_JUDGED, toy.TOY, "toy_particles"),
+    (lateral.PAPER_SCHEME_JUDGED, lateral.PAPER_SCHEME, "n_particles")])
+def test_a_judged_particles_study_is_its_parent_at_the_judged_count(judged, parent, field):
+    """The ledger's count of the paper's RBPF (``judged_particles``) is the parent study with
+    that count, bit for bit, and not the parent at its own count."""
+    settings = small().replace(judged_particles=7)
+    rows = judged.rows(settings, [3])
+    assert judged.repeats == parent.name
+    pd.testing.assert_frame_equal(rows, parent.rows(settings.replace(**{field: 7}), [3]))
+    assert not rows.equals(parent.rows(settings, [3]))
 
 
 @pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME, lateral.EKF,
