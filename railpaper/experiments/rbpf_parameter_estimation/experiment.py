@@ -67,7 +67,7 @@ from railpaper.threads import one_thread
 #: augmented EKF's (one guess) and the truth plant with model error.
 #: The exact posterior of the toy's and the lateral records (the soundness of the filters,
 #: :mod:`~railpaper.experiments.rbpf_parameter_estimation.soundness`) follows them; then the
-#: toy and the paper-scheme RBPF at ``judged_particles``, which only the stored decisive
+#: toy and the paper-scheme RBPF at ``JUDGED_PARTICLES``, which only the stored decisive
 #: evidence holds (a run does not compute them).
 STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR,
            soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR, TOY_JUDGED,

@@ -40,7 +40,7 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRecord,
     LateralRun,
 )
-from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
+from railpaper.experiments.rbpf_parameter_estimation.spec import JUDGED_PARTICLES, Settings
 from railpaper.experiments.records import (
     RecordMap,
     RecordStudy,
@@ -227,11 +227,11 @@ WORKING_SCHEME = RecordStudy("rbpf-parameter-estimation", "lateral_working_schem
 
 def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
     """The study :data:`PAPER_SCHEME_JUDGED`'s rows: :func:`paper_scheme_rows` with
-    ``judged_particles`` particles in place of ``n_particles``."""
-    return paper_scheme_rows(settings.replace(n_particles=settings.judged_particles), seeds)
+    :data:`JUDGED_PARTICLES` particles in place of ``n_particles``."""
+    return paper_scheme_rows(settings.replace(n_particles=JUDGED_PARTICLES), seeds)
 
 
-#: The paper-scheme RBPF with ``judged_particles`` (1000) particles, the count at which the
+#: The paper-scheme RBPF with :data:`JUDGED_PARTICLES` (1000) particles, the count at which the
 #: ledger judges the paper's RBPF (the paper prints none; blind policy,
 #: ``data/rbpf-parameter-estimation/blind/particles_reply.md``): one row per record, as
 #: :data:`PAPER_SCHEME`, which keeps our cheaper ``n_particles`` beside it.
@@ -324,7 +324,7 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
             spent[scheme] += time.perf_counter() - t0
         if i == 0:          # the paper's RBPF at the count the ledger judges it (real time)
             t0 = time.perf_counter()
-            lateral_rbpf(settings.replace(n_particles=settings.judged_particles), system, rec,
+            lateral_rbpf(settings.replace(n_particles=JUDGED_PARTICLES), system, rec,
                          theta, seed, "paper")
             spent["paper_judged"] = time.perf_counter() - t0
         post = None

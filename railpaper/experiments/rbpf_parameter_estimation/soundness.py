@@ -99,7 +99,7 @@ LATERAL_POSTERIOR = RecordStudy(CHAPTER, "lateral_posterior", lateral_posterior_
 POSTERIOR_OF = {"toy": TOY_POSTERIOR, "lateral_paper_scheme": LATERAL_POSTERIOR,
                 "lateral_working_scheme": LATERAL_POSTERIOR,
                 toy.TOY_JUDGED.name: TOY_POSTERIOR, PAPER_SCHEME_JUDGED.name: LATERAL_POSTERIOR}
-#: A study run at ``judged_particles`` has the columns of the study it repeats.
+#: A study run at ``JUDGED_PARTICLES`` has the columns of the study it repeats.
 _SAME_COLUMNS_AS = {study.name: study.repeats
                     for study in (toy.TOY_JUDGED, PAPER_SCHEME_JUDGED)}
 

@@ -10,6 +10,14 @@ from __future__ import annotations
 from railpaper.experiments.base import ChapterSpec, Parameter
 from railpaper.experiments.lateral_vehicle import TRACK_AND_SENSORS
 
+#: RBPF particles at which the ledger judges the paper's RBPF, on the toy and the lateral model
+#: (the studies ``*_judged_particles``): the paper prints no count, and paper 004 prints N = 1000
+#: for the same filter (blind policy, data/rbpf-parameter-estimation/blind/particles_reply.md).
+#: ``toy_particles`` and ``n_particles`` are our cheaper counts, shown beside it.  A constant of
+#: the ledger, not a setting: the evidence store keys rows by the settings, and a setting no
+#: other study reads would re-key every stored study.
+JUDGED_PARTICLES = 1000
+
 P = Parameter
 SPEC = ChapterSpec(
     name="rbpf-parameter-estimation",
@@ -52,11 +60,6 @@ SPEC = ChapterSpec(
           minimum=1),
         *TRACK_AND_SENSORS,
         P("n_particles", 200, "int", "RBPF particles (lateral)", minimum=2),
-        P("judged_particles", 1000, "int", "RBPF particles at which the ledger judges the "
-          "paper's RBPF, on the toy and the lateral model (studies *_judged_particles): the "
-          "paper prints none, and paper 004 prints N = 1000 for the same filter (blind policy, "
-          "data/rbpf-parameter-estimation/blind/particles_reply.md); toy_particles and "
-          "n_particles are our cheaper counts, shown beside it", minimum=2),
         P("prior_low", 0.5, "float", "prior box lower edge, fraction of the true value",
           positive=True),
         P("prior_high", 1.7, "float", "prior box upper edge, fraction of the true value",

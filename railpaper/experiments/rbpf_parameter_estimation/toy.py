@@ -18,7 +18,7 @@ from railpaper.engine import FilterRun, run_rbpf
 from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.experiments.base import ProgressCallback, no_progress
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
-from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
+from railpaper.experiments.rbpf_parameter_estimation.spec import JUDGED_PARTICLES, Settings
 from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
 from railpaper.settling import settling_step
@@ -197,12 +197,12 @@ TOY = RecordStudy("rbpf-parameter-estimation", "toy", toy_rows, chunk_records=10
 
 
 def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
-    """The study :data:`TOY_JUDGED`'s rows: :func:`toy_rows` with ``judged_particles`` RBPF
+    """The study :data:`TOY_JUDGED`'s rows: :func:`toy_rows` with :data:`JUDGED_PARTICLES` RBPF
     particles in place of ``toy_particles``."""
-    return toy_rows(settings.replace(toy_particles=settings.judged_particles), seeds)
+    return toy_rows(settings.replace(toy_particles=JUDGED_PARTICLES), seeds)
 
 
-#: The toy's records with ``judged_particles`` (1000) RBPF particles, the count at which the
+#: The toy's records with :data:`JUDGED_PARTICLES` (1000) RBPF particles, the count at which the
 #: ledger judges the paper's RBPF (blind policy,
 #: ``data/rbpf-parameter-estimation/blind/particles_reply.md``); :data:`TOY` keeps our cheaper
 #: ``toy_particles`` beside it.

@@ -12,7 +12,7 @@ import pytest
 
 from railpaper.experiments.rbpf_parameter_estimation import STUDIES
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, soundness, toy
+from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, soundness, spec, toy
 from railpaper.experiments.records import assert_chunk_invariant
 from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
 
@@ -45,12 +45,13 @@ def test_the_chapter_exposes_its_studies():
     (toy.TOY_JUDGED, toy.TOY, "toy_particles"),
     (lateral.PAPER_SCHEME_JUDGED, lateral.PAPER_SCHEME, "n_particles")])
 def test_a_judged_particles_study_is_its_parent_at_the_judged_count(judged, parent, field):
-    """The ledger's count of the paper's RBPF (``judged_particles``) is the parent study with
+    """The ledger's count of the paper's RBPF (``JUDGED_PARTICLES``) is the parent study with
     that count, bit for bit, and not the parent at its own count."""
-    settings = small().replace(judged_particles=7)
+    settings = small(toy_steps=60)
     rows = judged.rows(settings, [3])
     assert judged.repeats == parent.name
-    pd.testing.assert_frame_equal(rows, parent.rows(settings.replace(**{field: 7}), [3]))
+    pd.testing.assert_frame_equal(
+        rows, parent.rows(settings.replace(**{field: spec.JUDGED_PARTICLES}), [3]))
     assert not rows.equals(parent.rows(settings, [3]))
 
 
