@@ -393,6 +393,8 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
     # Rao-Blackwellisation (paper §4): the augmented state (16 + 5) vs what the particles sample
     metrics["rb_augmented_state_dim"] = lateral_16state.N_STATES + theta.size
     metrics["rb_particle_dim"] = int(runs[0].rbpf_paper_norm.shape[1])
+    # the particle count at which the ledger judges the paper's RBPF (its stored studies)
+    metrics["rbpf_judged_particles"] = JUDGED_PARTICLES
     t_s = np.arange(1, n_steps + 1) * settings.dt_s
     part = LateralPart(fixed=fixed, theta_true=theta, t_s=t_s, runs=tuple(runs),
                        critical_speed=critical, crlb=crlb, ekf_converged_count=ekf_count,
