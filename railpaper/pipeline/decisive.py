@@ -239,10 +239,10 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
         if posterior is not None:                     # its filters' soundness (version 3)
             if posterior.name not in tables:
                 tables[posterior.name] = store.read(posterior, settings)
-            known = tables[posterior.name]
+            known = tables[posterior.name]             # joined by seed
             rows = with_soundness(chapter, d.study, rows,
-                                  first_records(known.drop(columns="commit", errors="ignore"),
-                                                size) if len(known) else None, settings)
+                                  known.drop(columns="commit", errors="ignore")
+                                  if len(known) else None, settings)
         decision = decide(d, vocabulary, rows, {}, size,
                           estimator_of=estimator_catalogue(chapter, d.study))
         out[d.id] = {"verdict": decision.verdict, "statistic": decision.statistic,

@@ -280,7 +280,8 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
                ) -> tuple[pd.DataFrame | None, str]:
     """The per-record rows a declared row is decided on, and where they come from: this run's
     ``records_<study>.csv``, or — where the run holds fewer records than the registered
-    ``size`` — the stored decisive evidence for the run's settings when it holds enough."""
+    ``size`` — the stored decisive evidence for the run's settings when it holds enough, or
+    when it holds more than the run though not enough (the row is then undecided on them)."""
     path = out / f"records_{study}.csv"
     mine = _read_csv(str(path), path.stat().st_mtime_ns) if path.exists() else None
     if size is None or (mine is not None and len(mine) >= size) or run is None:
@@ -292,11 +293,14 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     rows_file = store.folder(RecordStudy(chapter, study, rows=None), settings) / "rows.csv"
     stored = _read_store(chapter, study, settings,
                          rows_file.stat().st_mtime_ns if rows_file.exists() else 0)
+    folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
     if len(stored) >= size:
-        folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
         used = f"the first {size} of " if len(stored) > size else ""
         return (first_records(stored.drop(columns="commit"), size),
                 f"{folder.relative_to(DATA_DIR.parent)} ({used}{len(stored)} records)")
+    if len(stored) > (0 if mine is None else len(mine)):    # short of the size, but more
+        return (stored.drop(columns="commit"),
+                f"{folder.relative_to(DATA_DIR.parent)} ({len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
 
 
@@ -397,10 +401,14 @@ def _with_posterior(chapter: str, study: str, table: pd.DataFrame | None, out: P
     posterior of ``study``'s records in a study of its own: that study's rows of the same
     records, from this run or the stored decisive evidence (:func:`study_rows`)."""
     posterior = posterior_study(chapter, study) if study and table is not None else None
-    if posterior is None or run is None:
+    if posterior is None or run is None or table.empty:
         return table
-    rows, _ = study_rows(chapter, posterior.name, out, run, len(table))
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
+    # the posterior's records up to the table's last seed (a study may start later than its
+    # posterior: chapter 003's judged studies skip records seen before their policy), joined
+    # by seed
+    through = int(table["seed"].max()) - posterior.first(settings) + 1
+    rows, _ = study_rows(chapter, posterior.name, out, run, through)
     return with_soundness(chapter, study, table, rows, settings)
 
 

@@ -40,7 +40,11 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralRecord,
     LateralRun,
 )
-from railpaper.experiments.rbpf_parameter_estimation.spec import JUDGED_PARTICLES, Settings
+from railpaper.experiments.rbpf_parameter_estimation.spec import (
+    JUDGED_PARTICLES,
+    Settings,
+    after_the_seen_records,
+)
 from railpaper.experiments.records import (
     RecordMap,
     RecordStudy,
@@ -238,6 +242,7 @@ def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
 PAPER_SCHEME_JUDGED = RecordStudy("rbpf-parameter-estimation",
                                   "lateral_paper_scheme_judged_particles",
                                   judged_particles_rows, chunk_records=1,
+                                  first_record=after_the_seen_records,
                                   repeats="lateral_paper_scheme")
 
 

@@ -17,6 +17,17 @@ from railpaper.experiments.lateral_vehicle import TRACK_AND_SENSORS
 #: the ledger, not a setting: the evidence store keys rows by the settings, and a setting no
 #: other study reads would re-key every stored study.
 JUDGED_PARTICLES = 1000
+#: Records of each judged study that were looked at before the count was fixed (a check of the
+#: verdicts' sensitivity to the count, at 1000 particles, on the first 30 toy and lateral
+#: records): the judged studies start after them, so that no record seen before the policy
+#: decides a row (a cold referee's finding).
+SEEN_RECORDS = 30
+
+
+def after_the_seen_records(settings) -> int:
+    """The first record of a judged study: the chapter's first seed plus
+    :data:`SEEN_RECORDS`."""
+    return int(settings.seed) + SEEN_RECORDS
 
 P = Parameter
 SPEC = ChapterSpec(

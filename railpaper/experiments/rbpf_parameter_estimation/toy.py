@@ -18,7 +18,11 @@ from railpaper.engine import FilterRun, run_rbpf
 from railpaper.estimators.ekf import EKFRun, eq18_model, run_augmented_ekf
 from railpaper.experiments.base import ProgressCallback, no_progress
 from railpaper.experiments.rbpf_parameter_estimation.result import ToyPart, ToyRun
-from railpaper.experiments.rbpf_parameter_estimation.spec import JUDGED_PARTICLES, Settings
+from railpaper.experiments.rbpf_parameter_estimation.spec import (
+    JUDGED_PARTICLES,
+    Settings,
+    after_the_seen_records,
+)
 from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.models.linear_toys import EQ18_G, Simulation, eq18_system, simulate_eq18
 from railpaper.settling import settling_step
@@ -207,4 +211,5 @@ def judged_particles_rows(settings: Settings, seeds) -> pd.DataFrame:
 #: ``data/rbpf-parameter-estimation/blind/particles_reply.md``); :data:`TOY` keeps our cheaper
 #: ``toy_particles`` beside it.
 TOY_JUDGED = RecordStudy("rbpf-parameter-estimation", "toy_judged_particles",
-                         judged_particles_rows, chunk_records=10, repeats="toy")
+                         judged_particles_rows, chunk_records=10,
+                         first_record=after_the_seen_records, repeats="toy")

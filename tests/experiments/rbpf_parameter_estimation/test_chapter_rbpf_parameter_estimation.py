@@ -57,10 +57,12 @@ def test_quick_run_has_every_key(quick_result):
     for key, row in claims.items():                 # run() alone gives every metric a rule reads
         for name in ([] if is_untestable(row) else rule_metrics(row)):
             assert name in metrics, (key, name)
+    from railpaper.experiments.rbpf_parameter_estimation import STUDIES
     from railpaper.pipeline.declarations import load_declarations
+    computes = {s.name: s.repeats or s.name for s in STUDIES}  # a repeat: only stored evidence
     for d in load_declarations("rbpf-parameter-estimation"):   # every declared column exists
         if d.study:
-            table = result.extra_tables[f"records_{d.study}"]
+            table = result.extra_tables[f"records_{computes[d.study]}"]
             assert all(name in table.columns for name in d.metrics), (d.id, d.metrics)
         else:
             assert all(name in metrics or name in result.timings for name in d.metrics), d.id
