@@ -53,6 +53,8 @@ PILOT_RECORDS = 30
 #: CPU time the whole decisive run may take (the issue's two CPU-hours).
 CPU_BUDGET_S = 2 * 3600.0
 DECISIVE_DIR = DATA_DIR / "evidence"
+#: ``<root>/allocation.json``: the size of each study the last decisive run's budget paid for.
+ALLOCATION_FILE = "allocation.json"
 
 
 def chapter_studies(chapter: str) -> dict[str, RecordStudy]:
@@ -162,6 +164,7 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
     chosen = allocate_sizes({(i.chapter, i.study): (rates[(i.chapter, i.study)],
                                                     i.sizes or (i.size,)) for i in items},
                             budget_s)
+    write_allocation(root, chosen)
     done = []
     for item in items:
         key = (item.chapter, item.study)
@@ -184,7 +187,8 @@ def run_decisive(chapters: list[str], client=None, workers: int = 1, progress=pr
         computed = record_map.usage["records"] - before["records"]
         done.append(StudyPlan(**{**item.__dict__, "cpu_s_per_record": per_record}))
         if computed:                     # a study only reused keeps the cost it was computed at
-            _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu)
+            _write_provenance(root / item.chapter, item, settings, commit, workers, wall, cpu,
+                              computed)
     for chapter in chapters:
         if (root / chapter / "provenance.json").exists():
             write_stored_verdicts(chapter, root)
@@ -218,6 +222,41 @@ def allocate_sizes(studies: dict, budget_s: float) -> dict:
     return out
 
 
+def write_allocation(root: Path, chosen: dict) -> Path:
+    """``<root>/allocation.json``: {"chapter/study": {"size", "left_out"}} of
+    :func:`allocate_sizes`' choice, merged into the entries of chapters this run did not plan.
+    Readers of the stored evidence use no more records of a study than its size here, so rows
+    stored by an earlier run under another allocation cannot decide what today's budget would
+    not pay for."""
+    path = Path(root) / ALLOCATION_FILE
+    entries = json.loads(path.read_text()) if path.exists() else {}
+    planned = {chapter for chapter, _ in chosen}
+    entries = {key: value for key, value in entries.items()
+               if key.split("/", 1)[0] not in planned}
+    entries.update({f"{chapter}/{study}": {"size": int(size), "left_out": skipped}
+                    for (chapter, study), (size, skipped) in chosen.items()})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(entries, indent=1, sort_keys=True) + "\n")
+    return path
+
+
+def allocated_size(chapter: str, study: str, root: Path = DECISIVE_DIR) -> int | None:
+    """The records of ``study`` the decisive run's budget paid for (None: no allocation
+    recorded for it, and every stored record counts)."""
+    path = Path(root) / ALLOCATION_FILE
+    if not path.exists():
+        return None
+    entry = json.loads(path.read_text()).get(f"{chapter}/{study}")
+    return None if entry is None else int(entry["size"])
+
+
+def affordable(rows, chapter: str, study: str, root: Path = DECISIVE_DIR):
+    """The stored ``rows`` of ``study`` the budget paid for: the first
+    :func:`allocated_size` of them by seed (all of them without an allocation)."""
+    allowed = allocated_size(chapter, study, root)
+    return rows if allowed is None or len(rows) <= allowed else first_records(rows, allowed)
+
+
 def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
     """Each sampled declared row's decision on the stored evidence alone: its first registered
     size of records (the records the default book decides it on); rows whose study holds fewer
@@ -230,7 +269,8 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
         if not d.study or not size:
             continue
         if d.study not in tables:                     # one read per study (000's: 17 MB)
-            tables[d.study] = store.read(RecordStudy(chapter, d.study, rows=None), settings)
+            tables[d.study] = affordable(store.read(RecordStudy(chapter, d.study, rows=None),
+                                                    settings), chapter, d.study, root)
         rows = tables[d.study]
         if len(rows) < size:
             continue
@@ -268,20 +308,21 @@ def _stored_cpu_per_record(folder: Path, study: str) -> float:
 
 
 def _write_provenance(folder: Path, item: StudyPlan, settings, commit: str, workers: int,
-                      wall_s: float, cpu_s: float) -> None:
-    """Record a study's computation in ``folder/provenance.json``: a study extended from fewer
-    stored records adds this run's wall and CPU time to what those records cost."""
+                      wall_s: float, cpu_s: float, computed: int) -> None:
+    """Record a study's computation in ``folder/provenance.json``: this run computed
+    ``computed`` of its ``item.size`` records; the others were stored, and keep their share of
+    what the stored records cost (their recorded time per record)."""
     path = folder / "provenance.json"
     record = json.loads(path.read_text()) if path.exists() else {"studies": {}}
     record.update(commit=commit, date=datetime.date.today().isoformat(),
                   settings=settings.as_dict(), machine=machine())
     before = record["studies"].get(item.study, {})
-    if before.get("records", 0) >= item.size:    # recomputed from scratch: its own cost only
-        before = {}
-    record["studies"][item.study] = {"seeds": [item.first, item.first + item.size],
-                                     "records": item.size, "workers": workers,
-                                     "wall_s": round(before.get("wall_s", 0.0) + wall_s, 1),
-                                     "cpu_s": round(before.get("cpu_s", 0.0) + cpu_s, 1)}
+    reused = (item.size - computed) / before["records"] if before.get("records") else 0.0
+    record["studies"][item.study] = {
+        "seeds": [item.first, item.first + item.size], "records": item.size,
+        "workers": workers,
+        "wall_s": round(reused * before.get("wall_s", 0.0) + wall_s, 1),
+        "cpu_s": round(reused * before.get("cpu_s", 0.0) + cpu_s, 1)}
     folder.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
 
@@ -307,7 +348,8 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
     return problems
 
 
-__all__ = ["CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan", "allocate_sizes",
+__all__ = ["ALLOCATION_FILE", "CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan",
+           "affordable", "allocate_sizes", "allocated_size", "write_allocation",
            "chapter_studies",
            "check_provenance", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -43,6 +43,7 @@ from railpaper.pipeline.claim_rules import (
     verdict_as_written,
     verdict_on_run,
 )
+from railpaper.pipeline.decisive import affordable
 from railpaper.pipeline.declarations import (
     Declaration,
     decide,
@@ -291,8 +292,9 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
     store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
     rows_file = store.folder(RecordStudy(chapter, study, rows=None), settings) / "rows.csv"
-    stored = _read_store(chapter, study, settings,
-                         rows_file.stat().st_mtime_ns if rows_file.exists() else 0)
+    stored = affordable(_read_store(chapter, study, settings,
+                                    rows_file.stat().st_mtime_ns if rows_file.exists() else 0),
+                        chapter, study, DECISIVE_EVIDENCE_DIR)
     folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
     if len(stored) >= size:
         used = f"the first {size} of " if len(stored) > size else ""

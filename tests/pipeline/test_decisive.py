@@ -62,11 +62,35 @@ def test_an_extended_study_adds_its_cost_and_a_recomputed_one_replaces_it(tmp_pa
     from railpaper.pipeline.decisive import StudyPlan, _write_provenance
 
     settings = SPEC.resolve({}, False)
-    _write_provenance(tmp_path, StudyPlan("c", "s", 100, 0), settings, "a", 2, 10.0, 20.0)
-    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "b", 2, 5.0, 8.0)
+    _write_provenance(tmp_path, StudyPlan("c", "s", 100, 0), settings, "a", 2, 10.0, 20.0, 100)
+    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "b", 2, 5.0, 8.0, 50)
     study = json.loads((tmp_path / "provenance.json").read_text())["studies"]["s"]
     assert (study["records"], study["wall_s"], study["cpu_s"]) == (150, 15.0, 28.0)
     assert study["seeds"] == [0, 150]
-    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "c", 2, 1.0, 2.0)
+    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 0), settings, "c", 2, 1.0, 2.0, 150)
     study = json.loads((tmp_path / "provenance.json").read_text())["studies"]["s"]
     assert (study["wall_s"], study["cpu_s"]) == (1.0, 2.0)
+    # 20 of the 150 stored records replaced (removed, then recomputed): the 130 kept cost
+    # 130/150 of the 2.0 CPU-s recorded for them, plus this run's 0.6
+    _write_provenance(tmp_path, StudyPlan("c", "s", 150, 30), settings, "d", 2, 0.3, 0.6, 20)
+    study = json.loads((tmp_path / "provenance.json").read_text())["studies"]["s"]
+    assert study["cpu_s"] == round(130 / 150 * 2.0 + 0.6, 1) == 2.3
+    assert study["seeds"] == [30, 180]
+
+
+def test_allocation_caps_the_stored_rows_a_reader_may_use(tmp_path):
+    """Rows stored under an earlier, larger allocation decide nothing today's budget would not
+    pay for: a reader takes the first allocated records by seed; a study without an entry
+    keeps all of its rows; a later run's chapters replace only their own entries."""
+    import pandas as pd
+
+    from railpaper.pipeline.decisive import affordable, allocated_size, write_allocation
+
+    write_allocation(tmp_path, {("c", "s"): (3, "sizes 5 left out"), ("d", "t"): (7, "")})
+    rows = pd.DataFrame({"seed": [4, 0, 3, 1, 2], "x": [40.0, 0.0, 30.0, 10.0, 20.0]})
+    assert affordable(rows, "c", "s", tmp_path).seed.tolist() == [0, 1, 2]
+    assert affordable(rows, "c", "other", tmp_path) is rows
+    assert allocated_size("c", "s", tmp_path) == 3
+    write_allocation(tmp_path, {("c", "s"): (5, "")})
+    assert (allocated_size("c", "s", tmp_path), allocated_size("d", "t", tmp_path)) == (5, 7)
+    assert affordable(rows, "c", "s", tmp_path) is rows
