@@ -41,18 +41,30 @@ def test_the_chapter_exposes_its_studies():
                                          "lateral_paper_scheme_judged_particles"]
 
 
-@pytest.mark.parametrize("judged, parent, field", [
-    (toy.TOY_JUDGED, toy.TOY, "toy_particles"),
-    (lateral.PAPER_SCHEME_JUDGED, lateral.PAPER_SCHEME, "n_particles")])
-def test_a_judged_particles_study_is_its_parent_at_the_judged_count(judged, parent, field):
-    """The ledger's count of the paper's RBPF (``JUDGED_PARTICLES``) is the parent study with
-    that count, bit for bit, and not the parent at its own count."""
-    settings = small(toy_steps=60)
-    rows = judged.rows(settings, [3])
-    assert judged.repeats == parent.name
+def test_the_judged_toy_is_the_toy_at_the_judged_count():
+    """The ledger's count of the paper's RBPF (``JUDGED_PARTICLES``) is the toy study with
+    that count, bit for bit, and not the toy at its own count; its records start after the
+    ones seen before the count was fixed."""
+    settings = small()
+    rows = toy.TOY_JUDGED.rows(settings, [3])
+    assert toy.TOY_JUDGED.repeats == toy.TOY.name
     pd.testing.assert_frame_equal(
-        rows, parent.rows(settings.replace(**{field: spec.JUDGED_PARTICLES}), [3]))
-    assert not rows.equals(parent.rows(settings, [3]))
+        rows, toy.TOY.rows(settings.replace(toy_particles=spec.JUDGED_PARTICLES), [3]))
+    assert not rows.equals(toy.TOY.rows(settings, [3]))
+    assert toy.TOY_JUDGED.first(settings) == settings.seed + spec.SEEN_RECORDS == 30
+
+
+def test_the_judged_lateral_study_runs_the_paper_scheme_at_the_judged_count(monkeypatch):
+    """The lateral judged study is the paper scheme's rows with ``n_particles`` replaced (the
+    rows themselves, at 1000 particles, are spot-checked against the stored evidence)."""
+    calls = []
+    monkeypatch.setattr(lateral, "paper_scheme_rows",
+                        lambda settings, seeds: calls.append((settings, seeds)) or "rows")
+    settings = small()
+    assert lateral.PAPER_SCHEME_JUDGED.rows(settings, [3]) == "rows"
+    assert calls == [(settings.replace(n_particles=spec.JUDGED_PARTICLES), [3])]
+    assert lateral.PAPER_SCHEME_JUDGED.repeats == lateral.PAPER_SCHEME.name
+    assert lateral.PAPER_SCHEME_JUDGED.first(settings) == settings.seed + spec.SEEN_RECORDS
 
 
 @pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME, lateral.EKF,
