@@ -282,7 +282,7 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
     """The per-record rows a declared row is decided on, and where they come from: this run's
     ``records_<study>.csv``, or — where the run holds fewer records than the registered
     ``size`` — the stored decisive evidence for the run's settings when it holds enough, or
-    when it holds more than the run though not enough (the row is then undecided on them)."""
+    for a study the run does not compute (the row is then undecided on what is stored)."""
     path = out / f"records_{study}.csv"
     mine = _read_csv(str(path), path.stat().st_mtime_ns) if path.exists() else None
     if size is None or (mine is not None and len(mine) >= size) or run is None:
@@ -300,7 +300,7 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
         used = f"the first {size} of " if len(stored) > size else ""
         return (first_records(stored.drop(columns="commit"), size),
                 f"{folder.relative_to(DATA_DIR.parent)} ({used}{len(stored)} records)")
-    if len(stored) > (0 if mine is None else len(mine)):    # short of the size, but more
+    if mine is None and len(stored):      # a study only the store holds, short of the size
         return (stored.drop(columns="commit"),
                 f"{folder.relative_to(DATA_DIR.parent)} ({len(stored)} records)")
     return mine, f"this run ({0 if mine is None else len(mine)} records)"
