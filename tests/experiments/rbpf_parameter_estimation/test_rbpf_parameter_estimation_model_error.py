@@ -10,7 +10,10 @@ from railpaper.experiments.rbpf_parameter_estimation.mismatch import run_mismatc
 
 def test_matched_metrics_from_part_two_equal_run_mismatch():
     settings = chapter.SPEC.resolve({"toy_seeds": 1, "n_records": 2, "ibis_records": 1,
-                                     "mismatch_records": 2, "ekf_guesses": 2}, quick=True)
+                                     "mismatch_records": 2, "ekf_guesses": 2,
+                                     "paper_records": 2, "working_records": 2,
+                                     "toy_ibis_records": 1, "toy_ibis_particles": 50,
+                                     "ibis_particles": 50}, quick=True)
     result = chapter.run(settings)
     m = result.metrics
     direct = run_mismatch(settings, 2, matched=True)          # filters the matched plant itself
