@@ -134,7 +134,8 @@ def soundness_columns(study: str, rows: pd.DataFrame, posterior: pd.DataFrame | 
     the ``posterior`` rows of the same seeds (a record without one, or every record when
     ``posterior`` is None, gets NaN: not known).
 
-    * ``toy`` (and ``toy_judged_particles``): ``satisfactory_<m>_init<ic>`` for m in ``rbpf`` (the paper scheme) and ``ekf``,
+    * ``toy`` (and ``toy_judged_particles``): ``satisfactory_<m>_init<ic>`` for m in ``rbpf``
+      (the paper scheme) and ``ekf``,
       from their final estimates (truth + ``<m>_final_error_x<j>_init<ic>``), and
       ``satisfactory_<m>_both_inits`` (both initial conditions);
     * ``lateral_*_scheme``: ``satisfactory`` (the study's one filter), from θ̂/θ = 1 +

@@ -11,8 +11,9 @@ from railpaper.experiments.base import ChapterSpec, Parameter
 from railpaper.experiments.lateral_vehicle import TRACK_AND_SENSORS
 
 #: RBPF particles at which the ledger judges the paper's RBPF, on the toy and the lateral model
-#: (the studies ``*_judged_particles``): the paper prints no count, and paper 004 prints N = 1000
-#: for the same filter (blind policy, data/rbpf-parameter-estimation/blind/particles_reply.md).
+#: (the studies ``*_judged_particles``): the paper prints no count, and the only RBPF particle
+#: count the book prints is paper 004's, N = 1000, on its own toy (blind policy, two readers:
+#: data/rbpf-parameter-estimation/blind/particles_reply.md, particles2_reply.md).
 #: ``toy_particles`` and ``n_particles`` are our cheaper counts, shown beside it.  A constant of
 #: the ledger, not a setting: the evidence store keys rows by the settings, and a setting no
 #: other study reads would re-key every stored study.
