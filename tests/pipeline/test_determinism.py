@@ -1,46 +1,62 @@
-"""Same parameters and seed → byte-identical metrics.json, across two separate processes.
+"""Same parameters and seed → byte-identical metrics.json, across separate processes.
 
-Two independent quick runs of ``reduced-order-observer`` (the quick book's, and a ``railpaper
-run`` on one BLAS thread) must write the same bytes; wall-clock figures must be in timings.json, not metrics.json.
+Two independent quick runs of ``reduced-order-observer`` (the quick book's, on the machine's
+default threads, and one more in a chapter process of its own on one BLAS/OpenMP thread, side by
+side with ``partial-state-observer`` as ``railpaper build --jobs 2`` runs them) must write the
+same bytes; wall-clock figures must be in timings.json, not metrics.json.
 """
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
+from railpaper.pipeline.chapter_process import run_chapters
+
 CHAPTER = "reduced-order-observer"
+#: Run side by side with CHAPTER (000 once differed from the quick book in 28 metrics' last bits).
+BESIDE = "partial-state-observer"
 WALL_CLOCK_WORDS = ("seconds", "_s_per", "wall", "time_per", "elapsed", "duration", "run_s")
 
 pytestmark = pytest.mark.slow
 
 
-def run_in_own_process(out_dir: Path) -> None:
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               PYTHONWARNINGS="ignore")
-    railpaper = Path(sys.executable).parent / "railpaper"
-    result = subprocess.run([str(railpaper), "run", CHAPTER, "--quick", "--out", str(out_dir)],
-                            capture_output=True, text=True, timeout=600, cwd=REPO, env=env)
-    assert result.returncode == 0, result.stderr[-2000:]
+@pytest.fixture(scope="module")
+def side_by_side(tmp_path_factory):
+    """CHAPTER and BESIDE run at once (two chapter processes, one BLAS/OpenMP thread each):
+    their output folders and the progress lines."""
+    base = tmp_path_factory.mktemp("determinism")
+    lines = []
+    with pytest.MonkeyPatch.context() as patch:
+        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            patch.setenv(name, "1")
+        run_chapters([CHAPTER, BESIDE], True, {n: base / n for n in (CHAPTER, BESIDE)}, jobs=2,
+                     say=lines.append)
+    return base, lines
 
 
 @pytest.fixture(scope="module")
-def two_runs(tmp_path_factory, quick_chapter_dir):
-    """The quick book's run of the chapter (its own kernel process, default threads) and one
-    more ``railpaper run`` in a process of its own on one BLAS/OpenMP thread."""
-    out = tmp_path_factory.mktemp("determinism") / "run"
-    run_in_own_process(out)
-    return [quick_chapter_dir(CHAPTER), out]
+def two_runs(side_by_side, quick_chapter_dir):
+    """The quick book's run of the chapter and the side-by-side one."""
+    return [quick_chapter_dir(CHAPTER), side_by_side[0] / CHAPTER]
 
 
 def test_metrics_json_bit_identical_across_processes(two_runs):
     first, second = ((d / "metrics.json").read_bytes() for d in two_runs)
     assert first == second
     assert json.loads(first)["metrics"], "no metrics written"
+
+
+def test_two_at_once_give_the_quick_books_bits(side_by_side, quick_chapter_dir):
+    """Side by side, and on one OpenBLAS/OpenMP thread where the quick book had the machine's
+    default: the same metrics to the last bit, for the chapter run beside it too."""
+    base, lines = side_by_side
+    for name in (CHAPTER, BESIDE):
+        ours = json.loads((base / name / "metrics.json").read_text())
+        book = json.loads((quick_chapter_dir(name) / "metrics.json").read_text())
+        assert ours["metrics"] == book["metrics"], name
+    assert not any(p.name.startswith(".") and "staging" in p.name for p in base.iterdir())
+    assert sum("2 running" in line for line in lines) == 1
+    assert sum(" done in " in line for line in lines) == 2
 
 
 def test_wall_clock_lives_in_timings_only(two_runs):
