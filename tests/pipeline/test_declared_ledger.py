@@ -149,3 +149,29 @@ def test_the_csv_gives_each_row_s_verdict_under_every_version(tmp_path):
     with path.open() as handle:
         table = list(csv.DictReader(handle))
     assert table[0]["verdicts_by_procedure_version"] == "v1 reproduced; v2 reproduced; v4 attainable"
+
+
+def test_a_study_only_the_store_holds_is_read_short_of_its_size(tmp_path, monkeypatch):
+    """A study the run does not compute (chapter 003's judged studies) is read from the stored
+    evidence even short of a row's size, so that the row says how many records it has; no more
+    of them than the budget's allocation paid for."""
+    from railpaper.experiments.records import RecordStudy
+    from railpaper.pipeline.decisive import write_allocation
+    from railpaper.pipeline.evidence_store import EvidenceStore
+
+    store_root = tmp_path / "evidence"
+    monkeypatch.setattr(ledger, "DECISIVE_EVIDENCE_DIR", store_root)
+    monkeypatch.setattr(ledger, "DATA_DIR", tmp_path / "data")
+    settings = chapter_spec(CHAPTER).resolve({}, False)
+    study = RecordStudy(CHAPTER, "only_stored", rows=None)
+    EvidenceStore(store_root).append(study, settings, pd.DataFrame(
+        {"seed": [5, 3, 4], "x": [1.0, 2.0, 3.0]}), "abc")
+    out = tmp_path / "run"
+    out.mkdir()
+    run = {"parameters": settings.as_dict(), "quick": False}
+    rows, source = ledger.study_rows(CHAPTER, "only_stored", out, run, 10)
+    assert sorted(rows.seed) == [3, 4, 5] and "commit" not in rows
+    assert source.startswith("evidence/") and source.endswith("(3 records)")
+    write_allocation(store_root, {(CHAPTER, "only_stored"): (2, "sizes 10 left out")})
+    rows, source = ledger.study_rows(CHAPTER, "only_stored", out, run, 10)
+    assert rows.seed.tolist() == [3, 4] and source.endswith("(2 records)")
