@@ -14,7 +14,7 @@ the four sensor noises); a chapter makes one from its own settings with
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -99,6 +99,11 @@ class LateralRecord:
     u_mps: np.ndarray | None
     du_var_m2ps2: np.ndarray
     u_var_m2ps2: np.ndarray
+
+    def first_steps(self, n_steps: int) -> LateralRecord:
+        """The record cut to its first ``n_steps`` filter steps (measurements and input)."""
+        return replace(self, y=self.y[:n_steps],
+                       u_mps=None if self.u_mps is None else self.u_mps[:n_steps])
 
 
 def vehicle(params_path: Path | None = None) -> tuple[dict, np.ndarray]:

@@ -15,7 +15,6 @@ metrics and its timings; the metrics of a stack of runs are :func:`lateral_metri
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -83,12 +82,6 @@ def record_system(settings: Settings, fixed: dict, theta: np.ndarray, record: La
 #: Steps over which the paper's RBPF at ``JUDGED_PARTICLES`` is timed for the real-time row (its
 #: cost per step is the same at every step: it resamples and moves at each one).
 REAL_TIME_STEPS = 200
-
-
-def first_steps(record: LateralRecord, n_steps: int) -> LateralRecord:
-    """``record`` cut to its first ``n_steps`` filter steps."""
-    return dataclasses.replace(record, y=record.y[:n_steps],
-                               u_mps=None if record.u_mps is None else record.u_mps[:n_steps])
 
 
 def lateral_rbpf(settings: Settings, system, record: LateralRecord, theta: np.ndarray, seed: int,
@@ -342,7 +335,7 @@ def run_lateral(settings: Settings, progress, record_map: RecordMap = map_in_pro
         if i == 0:          # the paper's RBPF at the count the ledger judges it (real time),
             t0 = time.perf_counter()                  # timed on the record's first steps
             lateral_rbpf(settings.replace(n_particles=JUDGED_PARTICLES), system,
-                         first_steps(rec, REAL_TIME_STEPS), theta, seed, "paper")
+                         rec.first_steps(REAL_TIME_STEPS), theta, seed, "paper")
             spent["paper_judged"] = time.perf_counter() - t0
         post = None
         if i < n_ibis:

@@ -12,7 +12,7 @@ reaches flange contact: the linear model has no flange.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -83,7 +83,7 @@ def simulate_faulted(settings: Settings, fault_settings: dict, fixed: dict, thet
     contact = lateral_16state.flange_contact_step(states, fault_settings["flange_clearance_m"])
     end = K if contact < 0 else min(K, (contact - 1) // sub)
     if end < K:
-        record = replace(record, y=record.y[:end], u_mps=record.u_mps[:end])
+        record = record.first_steps(end)
     j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     factor = (np.ones(end) if j is None else
               np.array([th[j] for th in thetas])[piece[:end]] / theta[j])
