@@ -18,6 +18,7 @@ Two steps, in this order, each a command:
 from __future__ import annotations
 
 import datetime
+import functools
 import json
 import time
 from dataclasses import dataclass
@@ -246,8 +247,16 @@ def allocated_size(chapter: str, study: str, root: Path = DECISIVE_DIR) -> int |
     path = Path(root) / ALLOCATION_FILE
     if not path.exists():
         return None
-    entry = json.loads(path.read_text()).get(f"{chapter}/{study}")
+    stat = path.stat()
+    entry = _allocation(str(path), stat.st_mtime_ns, stat.st_size).get(f"{chapter}/{study}")
     return None if entry is None else int(entry["size"])
+
+
+@functools.lru_cache(maxsize=4)
+def _allocation(path: str, mtime_ns: int, size: int) -> dict[str, Any]:  # noqa: ARG001
+    """The allocation file, parsed once per version (modification time and size: the cache
+    key; the ledger asks for it per row)."""
+    return json.loads(Path(path).read_text())
 
 
 def affordable(rows, chapter: str, study: str, root: Path = DECISIVE_DIR):
@@ -277,8 +286,9 @@ def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[s
         rows = first_records(rows.drop(columns="commit"), size)
         posterior = posterior_study(chapter, d.study)
         if posterior is not None:                     # its filters' soundness (version 3)
-            if posterior.name not in tables:
-                tables[posterior.name] = store.read(posterior, settings)
+            if posterior.name not in tables:          # as the ledger reads it (study_rows)
+                tables[posterior.name] = affordable(store.read(posterior, settings), chapter,
+                                                    posterior.name, root)
             known = tables[posterior.name]             # joined by seed
             rows = with_soundness(chapter, d.study, rows,
                                   known.drop(columns="commit", errors="ignore")

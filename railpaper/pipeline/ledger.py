@@ -290,12 +290,12 @@ def study_rows(chapter: str, study: str, out: Path, run: dict | None, size: int 
         used = f"the first {size} of " if size is not None and count > size else ""
         return first_records(mine, size), f"this run ({used}{count} records)"
     settings = chapter_spec(chapter).resolve(run.get("parameters", {}), bool(run.get("quick")))
-    store = EvidenceStore(DECISIVE_EVIDENCE_DIR)
-    rows_file = store.folder(RecordStudy(chapter, study, rows=None), settings) / "rows.csv"
+    folder = EvidenceStore(DECISIVE_EVIDENCE_DIR).folder(RecordStudy(chapter, study, rows=None),
+                                                         settings)
+    rows_file = folder / "rows.csv"
     stored = affordable(_read_store(chapter, study, settings,
                                     rows_file.stat().st_mtime_ns if rows_file.exists() else 0),
                         chapter, study, DECISIVE_EVIDENCE_DIR)
-    folder = store.folder(RecordStudy(chapter, study, rows=None), settings)
     if len(stored) >= size:
         used = f"the first {size} of " if len(stored) > size else ""
         return (first_records(stored.drop(columns="commit"), size),
