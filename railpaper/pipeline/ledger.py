@@ -43,7 +43,7 @@ from railpaper.pipeline.claim_rules import (
     verdict_as_written,
     verdict_on_run,
 )
-from railpaper.pipeline.decisive import affordable
+from railpaper.pipeline.decisive import affordable, allocated_size
 from railpaper.pipeline.declarations import (
     Declaration,
     decide,
@@ -320,9 +320,14 @@ def _with_cost(decision: Decision, chapter: str, study: str, size: int | None,
     if not entry or not entry.get("records"):
         return decision
     hours = entry["cpu_s"] / entry["records"] * size / 3600
+    paid = allocated_size(chapter, study, DECISIVE_EVIDENCE_DIR)
+    held = (f"the stored evidence holds {entry['records']}" if paid is None
+            or paid >= entry["records"] else
+            f"the 2-CPU-hour budget of the deciding runs, allocated cheapest first, pays for "
+            f"{paid} of them; {entry['records']} are stored")
     return dataclasses.replace(decision, reason=(
         f"{decision.reason}; {size} records need about {hours:.2g} CPU-hours at the stored "
-        f"records' rate (the stored evidence holds {entry['records']})"))
+        f"records' rate ({held})"))
 
 
 @functools.lru_cache(maxsize=32)

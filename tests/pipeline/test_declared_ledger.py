@@ -175,3 +175,23 @@ def test_a_study_only_the_store_holds_is_read_short_of_its_size(tmp_path, monkey
     write_allocation(store_root, {(CHAPTER, "only_stored"): (2, "sizes 10 left out")})
     rows, source = ledger.study_rows(CHAPTER, "only_stored", out, run, 10)
     assert rows.seed.tolist() == [3, 4] and source.endswith("(2 records)")
+
+
+def test_a_row_short_of_its_size_says_what_the_budget_pays_for(tmp_path, monkeypatch):
+    """Its reason gives the CPU time the size needs at the stored rate (2 CPU-s a record: 5000
+    records, 2.8 CPU-hours) and, where the allocation pays for fewer records than are stored,
+    says so instead of counting the stored ones."""
+    from railpaper.pipeline.decisive import write_allocation
+    from railpaper.rulebook import Decision
+
+    monkeypatch.setattr(ledger, "DECISIVE_EVIDENCE_DIR", tmp_path)
+    (tmp_path / CHAPTER).mkdir()
+    (tmp_path / CHAPTER / "provenance.json").write_text(json.dumps(
+        {"studies": {"monte_carlo": {"records": 1000, "cpu_s": 2000.0}}}))
+    short = Decision("undecided", "60 records of the 5000 registered")
+    reason = ledger._with_cost(short, CHAPTER, "monte_carlo", 5000, None).reason
+    assert reason.endswith("need about 2.8 CPU-hours at the stored records' rate (the stored "
+                           "evidence holds 1000)")
+    write_allocation(tmp_path, {(CHAPTER, "monte_carlo"): (400, "sizes 5000 left out")})
+    reason = ledger._with_cost(short, CHAPTER, "monte_carlo", 5000, None).reason
+    assert reason.endswith("pays for 400 of them; 1000 are stored)")
