@@ -8,9 +8,8 @@ session in a background process, started as soon as a worker has collected a tes
 so it runs beside the unit tests; the modules that read it run last, and the first of them waits
 for it.
 
-``make test`` runs the tests on two pytest-xdist workers (``-n 2 --dist loadfile
---no-loadscope-reorder``: a module stays on one worker, with its module fixtures, and the modules
-are handed out in the order below), so the unit tests fill both cores around the book.  The
+``make test`` runs the tests on two pytest-xdist workers (``-n 2 --dist loadfile``: a module stays
+on one worker, with its module fixtures), so the unit tests fill both cores around the book.  The
 workers share one book through a folder the controlling process makes (``RAILPAPER_QUICK_BOOK``):
 the first worker to claim it starts the build; every worker waits for the build's exit code file;
 the controlling process removes the folder (and stops a build still running) at the end.  A plain
@@ -110,29 +109,12 @@ def _start_quick_book() -> None:
     (root / "pid").write_text(str(process.pid))
 
 
-#: The modules that read the quick book and take longest once it is built, longest first: they
-#: start first among those modules, so that the two workers end together.
-SLOWEST_BOOK_READERS = ("test_chapter_rbpf_parameter_estimation", "test_determinism",
-                        "test_chapter_reduced_order_observer", "test_book")
-
-
-def _book_reader_rank(module) -> int:
-    name = module.__name__.rsplit(".", 1)[-1]
-    return (SLOWEST_BOOK_READERS.index(name) if name in SLOWEST_BOOK_READERS
-            else len(SLOWEST_BOOK_READERS))
-
-
 def pytest_collection_modifyitems(session, config, items):
     """Modules that read the quick book run last (each module's own order kept, so its module
-    fixtures are set up once), the slowest of them first: the other tests then fill the cores
-    while the book builds.  ``make test`` passes ``--no-loadscope-reorder`` so that the workers
-    take the modules in this order (xdist would otherwise start with the modules that have the
-    most tests)."""
+    fixtures are set up once): the other tests then fill the cores while the book builds."""
     reads_book = {item.module for item in items
                   if BOOK_FIXTURES & set(getattr(item, "fixturenames", ()))}
-    items.sort(key=lambda item: (item.module in reads_book,
-                                 _book_reader_rank(item.module) if item.module in reads_book
-                                 else 0))
+    items.sort(key=lambda item: item.module in reads_book)
 
 
 def pytest_collection_finish(session):
