@@ -63,14 +63,15 @@ from railpaper.experiments.records import RecordMap, map_in_process
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 
-#: The chapter's per-record studies: the toy's records; each lateral RBPF scheme's, the
-#: augmented EKF's (one guess) and the truth plant with model error.
+#: The chapter's per-record studies: the toy's records and their exact posterior (calibration);
+#: each lateral RBPF scheme's, the augmented EKF's (one guess) and the truth plant with model
+#: error.
 #: The exact posterior of the toy's and the lateral records (the soundness of the filters,
 #: :mod:`~railpaper.experiments.rbpf_parameter_estimation.soundness`) follows them; then the
 #: toy and the paper-scheme RBPF at ``JUDGED_PARTICLES``, which only the stored decisive
 #: evidence holds (a run does not compute them).
-STUDIES = (TOY, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME, lateral.EKF, MODEL_ERROR,
-           soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR, TOY_JUDGED,
+STUDIES = (TOY, posterior.TOY_CALIBRATION, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME,
+           lateral.EKF, MODEL_ERROR, soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR, TOY_JUDGED,
            lateral.PAPER_SCHEME_JUDGED)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
@@ -124,8 +125,8 @@ def run(settings: Settings, *, progress=None,
     """The whole chapter for ``settings`` (see :data:`SPEC`), on one numba and one OpenBLAS
     thread (:func:`railpaper.threads.one_thread`).  ``record_map(study, settings, seeds,
     progress)`` computes the rows of the per-record studies (:data:`STUDIES`: the toy's records
-    after the illustrated one, and each lateral RBPF scheme's records after the first
-    ``n_records``); default: in this process."""
+    and their exact posterior after the illustrated one, and each lateral RBPF scheme's records
+    after the first ``n_records``); default: in this process."""
     progress = progress or default_progress()
     validate(settings)
     with one_thread():
@@ -152,7 +153,10 @@ def _run(settings: Settings, progress, record_map: RecordMap) -> RbpfParameterEs
         singular = np.linalg.svd(eq18_model(start)[0], compute_uv=False)
         metrics[f"toy_ekf_transition_rcond_init{ic}"] = float(singular[-1] / singular[0])
     t0 = time.perf_counter()
-    toy = posterior.toy_posteriors(settings, toy)               # the exact posterior, toy
+    progress(0.08, "toy: exact posterior")
+    toy = posterior.toy_posteriors(                             # the exact posterior, toy
+        settings, toy, record_map, lambda fraction, message: progress(0.08 + 0.02 * fraction,
+                                                                      message))
     timings["ibis_toy_s"] = time.perf_counter() - t0
     metrics.update(posterior.toy_metrics(toy))
     metrics.update(evidence.toy_offset_metrics(toy.records, toy.coverage, toy.truth))

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.engine import credible_interval_covers, run_ibis
+from railpaper.experiments.base import ProgressCallback, no_progress
 from railpaper.experiments.rbpf_parameter_estimation import toy
 from railpaper.experiments.rbpf_parameter_estimation.result import (
     LateralPart,
@@ -47,10 +48,12 @@ from railpaper.experiments.rbpf_parameter_estimation.result import (
     ToyPart,
 )
 from railpaper.experiments.rbpf_parameter_estimation.spec import Settings
+from railpaper.experiments.records import RecordMap, RecordStudy, map_in_process, normalised
 from railpaper.models import lateral_16state
 from railpaper.models.linear_toys import EQ18_G, Simulation
 from railpaper.settling import holds_from
 from railpaper.stats import median_interval, rate
+from railpaper.threads import one_thread
 
 SEED_KEY = 17                      # the samplers' generators: [seed, SEED_KEY]
 START, WITHIN = 350, 0.05          # the paper's claim: every parameter within 5 % after 350 steps
@@ -92,27 +95,67 @@ def lateral_posterior(settings: Settings, system, record: LateralRecord, theta: 
 
 
 # ----------------------------------------------------------------------------- toy, every record
-def toy_posteriors(settings: Settings, part: ToyPart) -> ToyPart:
+def _calibration_row(seed: int, post: PosteriorRun, truth: np.ndarray) -> dict:
+    """One toy record's exact posterior after the last step: per parameter its mean, its 5 and
+    95 % quantiles and whether that interval holds the true value (dimensionless)."""
+    covers = credible_interval_covers(post, truth)
+    row = {"seed": int(seed)}
+    for j in range(4):
+        row[f"posterior_mean_x{j + 1}"] = float(post.mean[-1, j])
+        row[f"posterior_q05_x{j + 1}"] = float(post.q05[-1, j])
+        row[f"posterior_q95_x{j + 1}"] = float(post.q95[-1, j])
+        row[f"posterior_covers_x{j + 1}"] = bool(covers[j])
+    return row
+
+
+def toy_calibration_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The study :data:`TOY_CALIBRATION`'s rows: per seed, :func:`_calibration_row` of the
+    exact posterior (:func:`toy_posterior`, initial condition 1's box) on the record the toy
+    study filtered (:func:`~railpaper.experiments.rbpf_parameter_estimation.toy.simulate` on
+    ``default_rng(seed)``)."""
+    truth, rows = toy.truth(settings), []
+    with one_thread():
+        for seed in seeds:
+            sim = toy.simulate(settings, np.random.default_rng(int(seed)))
+            rows.append(_calibration_row(seed, toy_posterior(settings, sim, int(seed)), truth))
+    return pd.DataFrame(rows)
+
+
+#: The toy's calibration records: the exact posterior of every toy record after the illustrated
+#: one, up to ``toy_ibis_records`` (the illustrated record's is computed in full in the run).
+TOY_CALIBRATION = RecordStudy("rbpf-parameter-estimation", "toy_calibration",
+                              toy_calibration_rows, chunk_records=10)
+
+
+def toy_posteriors(settings: Settings, part: ToyPart, record_map: RecordMap = map_in_process,
+                   progress: ProgressCallback = no_progress) -> ToyPart:
     """IBIS on the first ``toy_ibis_records`` toy records of ``part`` (records ``seed`` …,
-    initial condition 1's box);
-    returns ``part`` with :attr:`ToyPart.record`, :attr:`~ToyPart.posterior` (the illustrated
-    record) and :attr:`~ToyPart.coverage` filled."""
-    rows, first = [], None
+    initial condition 1's box): the illustrated record ``seed`` in full here, the others as the
+    rows of :data:`TOY_CALIBRATION` through ``record_map``; returns ``part`` with
+    :attr:`ToyPart.record`, :attr:`~ToyPart.posterior` (the illustrated record) and
+    :attr:`~ToyPart.coverage` (one row per record × parameter) filled."""
+    n_records = min(settings.toy_ibis_records, settings.toy_seeds)
+    sim = toy.simulate(settings, np.random.default_rng(settings.seed))  # the record run_toy filtered
+    post = toy_posterior(settings, sim, settings.seed)
+    wide = normalised(pd.DataFrame([_calibration_row(settings.seed, post, part.truth)]))
+    if n_records > 1:
+        others = record_map(TOY_CALIBRATION, settings,
+                            range(settings.seed + 1, settings.seed + n_records), progress)
+        wide = pd.concat([wide, others], ignore_index=True)
     one = part.records[part.records.init == 1].set_index("seed")
-    for i in range(min(settings.toy_ibis_records, settings.toy_seeds)):
-        seed = settings.seed + i
-        sim = toy.simulate(settings, np.random.default_rng(seed))   # the record run_toy filtered
-        post = toy_posterior(settings, sim, seed)
-        covers = credible_interval_covers(post, part.truth)
+    rows = []
+    for record in wide.to_dict("records"):
+        seed = int(record["seed"])
         for j in range(4):
-            rows.append(dict(seed=seed, parameter=f"x{j + 1}", truth=part.truth[j],
-                             posterior_mean=post.mean[-1, j],
-                             posterior_q05=post.q05[-1, j], posterior_q95=post.q95[-1, j],
-                             posterior_covers=bool(covers[j]),
-                             paper_covers=bool(one.loc[seed, f"rbpf_covers_x{j + 1}"]),
-                             tempered_covers=bool(one.loc[seed, f"rbpf_working_covers_x{j + 1}"])))
-        first = first or (sim, post)
-    return replace(part, record=first[0], posterior=first[1], coverage=pd.DataFrame(rows))
+            name = f"x{j + 1}"
+            rows.append(dict(seed=seed, parameter=name, truth=part.truth[j],
+                             posterior_mean=record[f"posterior_mean_{name}"],
+                             posterior_q05=record[f"posterior_q05_{name}"],
+                             posterior_q95=record[f"posterior_q95_{name}"],
+                             posterior_covers=bool(record[f"posterior_covers_{name}"]),
+                             paper_covers=bool(one.loc[seed, f"rbpf_covers_{name}"]),
+                             tempered_covers=bool(one.loc[seed, f"rbpf_working_covers_{name}"])))
+    return replace(part, record=sim, posterior=post, coverage=pd.DataFrame(rows))
 
 
 def toy_metrics(part: ToyPart) -> dict:
@@ -198,6 +241,6 @@ def lateral_metrics(part: LateralPart, simulated: bool = True) -> dict:
     return out
 
 
-__all__ = ["PROPOSAL", "SEED_KEY", "lateral_metrics", "lateral_posterior",
-           "toy_box", "toy_metrics", "toy_posterior", "toy_posterior_json",
+__all__ = ["PROPOSAL", "SEED_KEY", "TOY_CALIBRATION", "lateral_metrics", "lateral_posterior",
+           "toy_box", "toy_calibration_rows", "toy_metrics", "toy_posterior", "toy_posterior_json",
            "toy_posteriors", "toy_record_table"]

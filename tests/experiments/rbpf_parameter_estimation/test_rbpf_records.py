@@ -12,14 +12,21 @@ import pytest
 
 from railpaper.experiments.rbpf_parameter_estimation import STUDIES
 from railpaper.experiments.rbpf_parameter_estimation import experiment as chapter
-from railpaper.experiments.rbpf_parameter_estimation import lateral, mismatch, soundness, spec, toy
+from railpaper.experiments.rbpf_parameter_estimation import (
+    lateral,
+    mismatch,
+    posterior,
+    soundness,
+    spec,
+    toy,
+)
 from railpaper.experiments.records import assert_chunk_invariant
 from railpaper.pipeline.evidence_store import EvidenceStore, stored_map
 
 #: Small settings: 3 toy records of 60 steps, 2 lateral records of 400 steps (3 for the paper
-#: scheme), few particles, no exact posterior beyond one record.
+#: scheme), few particles, the exact posterior on two toy records and one lateral record.
 SMALL = dict(toy_seeds=3, toy_steps=60, toy_particles=30, toy_tempering_steps=10,
-             toy_ibis_particles=20, toy_ibis_records=1, n_steps=400, n_particles=20,
+             toy_ibis_particles=20, toy_ibis_records=2, n_steps=400, n_particles=20,
              tempering_steps=50, n_records=2, paper_records=3, working_records=2,
              ekf_guesses=1, ekf_steps=50, ibis_records=1, ibis_particles=20, mismatch_records=2)
 
@@ -35,7 +42,8 @@ def small_run():
 
 
 def test_the_chapter_exposes_its_studies():
-    assert [s.name for s in STUDIES] == ["toy", "lateral_paper_scheme", "lateral_working_scheme",
+    assert [s.name for s in STUDIES] == ["toy", "toy_calibration", "lateral_paper_scheme",
+                                         "lateral_working_scheme",
                                          "lateral_ekf", "model_error", "toy_posterior",
                                          "lateral_posterior", "toy_judged_particles",
                                          "lateral_paper_scheme_judged_particles"]
@@ -67,11 +75,29 @@ def test_the_judged_lateral_study_runs_the_paper_scheme_at_the_judged_count(monk
     assert lateral.PAPER_SCHEME_JUDGED.first(settings) == settings.seed + spec.SEEN_RECORDS
 
 
-@pytest.mark.parametrize("study", [toy.TOY, lateral.PAPER_SCHEME, lateral.EKF,
+@pytest.mark.parametrize("study", [toy.TOY, posterior.TOY_CALIBRATION, lateral.PAPER_SCHEME,
+                                   lateral.EKF,
                                    mismatch.MODEL_ERROR, soundness.TOY_POSTERIOR,
                                    soundness.LATERAL_POSTERIOR])
 def test_a_record_does_not_depend_on_its_chunk(study):
     assert_chunk_invariant(study, small(), [4, 2])
+
+
+def test_a_toy_calibration_row_is_the_exact_posterior_of_its_record():
+    """A row of the toy's calibration study is the exact posterior of the record the toy study
+    filtered (IBIS, computed here again by hand), and it covers x_j exactly when the truth lies
+    between its 5 and 95 % quantiles."""
+    settings = small()
+    row = posterior.toy_calibration_rows(settings, [5]).iloc[0]
+    sim = toy.simulate(settings, np.random.default_rng(5))
+    post = posterior.toy_posterior(settings, sim, 5)
+    truth = toy.truth(settings)
+    for j in range(4):
+        name = f"x{j + 1}"
+        assert row[f"posterior_mean_{name}"] == post.mean[-1, j]
+        assert row[f"posterior_q05_{name}"] == post.q05[-1, j]
+        assert row[f"posterior_q95_{name}"] == post.q95[-1, j]
+        assert row[f"posterior_covers_{name}"] == (post.q05[-1, j] <= truth[j] <= post.q95[-1, j])
 
 
 def test_the_toy_rows_are_the_long_records_side_by_side():
@@ -114,6 +140,8 @@ def test_dask_workers_and_the_store_give_the_same_metrics(tmp_path, dask_client,
     pd.testing.assert_frame_equal(here.toy.records, there.toy.records, check_exact=True)
     assert sorted(store.read(toy.TOY, settings).seed) == [1, 2]          # after the illustrated
     assert sorted(store.read(lateral.PAPER_SCHEME, settings).seed) == [2]
+    assert sorted(store.read(posterior.TOY_CALIBRATION, settings).seed) == [1]
+    pd.testing.assert_frame_equal(here.toy.coverage, there.toy.coverage, check_exact=True)
     for name in ("records_toy", "records_lateral_paper_scheme", "records_lateral_ekf",
                  "records_model_error"):
         assert name in here.extra_tables
