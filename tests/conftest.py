@@ -63,10 +63,22 @@ def _book_priority() -> None:
         pass
 
 
+#: OpenBLAS threads per process in the test session (unless the caller set
+#: ``OPENBLAS_NUM_THREADS``): the workers, the quick book and every process they start inherit
+#: it.  An idle OpenBLAS thread spins before it sleeps, and with the two workers, the book and
+#: their children competing for two cores that spinning is paid for: the whole suite took
+#: 515 CPU-s (266 s) with the machine's default of two threads and 446 CPU-s (233 s) with one
+#: (warm caches, this 2-core machine).  Results do not depend on it (``test_determinism.py``
+#: runs two chapters on the machine's default threads and compares them with the quick book's).
+BLAS_THREADS = "1"
+
+
 def pytest_configure(config):
-    """The controlling process (or a run without workers) makes the shared book folder; a
-    worker lowers its priority below the book's where the book can take its own back."""
+    """The controlling process (or a run without workers) makes the shared book folder and sets
+    :data:`BLAS_THREADS` for the processes it starts; a worker lowers its priority below the
+    book's where the book can take its own back."""
     if not _is_worker():
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)
         os.environ[SHARED] = tempfile.mkdtemp(prefix="railpaper-quick-book-")
     elif _may_raise_priority():
         os.nice(WORKER_NICENESS)

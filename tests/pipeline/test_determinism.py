@@ -1,9 +1,10 @@
 """Same parameters and seed → byte-identical metrics.json, across separate processes.
 
-Two independent quick runs of ``reduced-order-observer`` (the quick book's, on the machine's
-default threads, and one more in a chapter process of its own on one BLAS/OpenMP thread, side by
-side with ``partial-state-observer`` as ``railpaper build --jobs 2`` runs them) must write the
-same bytes; wall-clock figures must be in timings.json, not metrics.json.
+Two independent quick runs of ``reduced-order-observer`` (the quick book's, on the test
+session's one OpenBLAS thread (``conftest.BLAS_THREADS``), and one more in a chapter process of
+its own on the machine's default BLAS/OpenMP threads, side by side with
+``partial-state-observer`` as ``railpaper build --jobs 2`` runs them) must write the same bytes;
+wall-clock figures must be in timings.json, not metrics.json.
 """
 
 import json
@@ -22,13 +23,14 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def side_by_side(tmp_path_factory):
-    """CHAPTER and BESIDE run at once (two chapter processes, one BLAS/OpenMP thread each):
-    their output folders and the progress lines."""
+    """CHAPTER and BESIDE run at once (two chapter processes, each on the machine's default
+    BLAS/OpenMP threads, where the quick book had one): their output folders and the progress
+    lines."""
     base = tmp_path_factory.mktemp("determinism")
     lines = []
     with pytest.MonkeyPatch.context() as patch:
         for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            patch.setenv(name, "1")
+            patch.delenv(name, raising=False)
         run_chapters([CHAPTER, BESIDE], True, {n: base / n for n in (CHAPTER, BESIDE)}, jobs=2,
                      say=lines.append)
     return base, lines
@@ -47,8 +49,8 @@ def test_metrics_json_bit_identical_across_processes(two_runs):
 
 
 def test_two_at_once_give_the_quick_books_bits(side_by_side, quick_chapter_dir):
-    """Side by side, and on one OpenBLAS/OpenMP thread where the quick book had the machine's
-    default: the same metrics to the last bit, for the chapter run beside it too."""
+    """Side by side, and on the machine's default OpenBLAS/OpenMP threads where the quick book
+    had one: the same metrics to the last bit, for the chapter run beside it too."""
     base, lines = side_by_side
     for name in (CHAPTER, BESIDE):
         ours = json.loads((base / name / "metrics.json").read_text())
