@@ -599,17 +599,24 @@ def _sampled(d: Declaration, entry: dict[str, Any], policy: dict[str, Any],
         if baseline_mean == 0.0 and version >= 2:
             return Decision("undecided", f"the baseline {d.metrics[0]!r} has mean 0: a change "
                             "relative to it is undefined", n=len(rows))
-        return rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
-                                      rows[d.metrics[1]].to_numpy(float), d.direction,
-                                      entry["margin"], level)
+        return _named_pair(d, rulebook.paired_change(rows[d.metrics[0]].to_numpy(float),
+                                                     rows[d.metrics[1]].to_numpy(float),
+                                                     d.direction, entry["margin"], level))
     if d.procedure in ("equivalence", "departure"):
         procedure = rulebook.equivalence if d.procedure == "equivalence" else rulebook.departure
         if len(d.metrics) == 1:
             return procedure(rows[d.metrics[0]].to_numpy(float), entry["margin"], level)
-        return procedure(margin=entry["margin"], level=level,
-                         baseline=rows[d.metrics[0]].to_numpy(float),
-                         other=rows[d.metrics[1]].to_numpy(float))
+        return _named_pair(d, procedure(margin=entry["margin"], level=level,
+                                        baseline=rows[d.metrics[0]].to_numpy(float),
+                                        other=rows[d.metrics[1]].to_numpy(float)))
     return None
+
+
+def _named_pair(d: Declaration, decision: Decision) -> Decision:
+    """``decision`` of a paired row, its reason opening with the two columns compared (the
+    change is from the first, the baseline, to the second): a reader sees which is which."""
+    return dataclasses.replace(decision, reason=f"{d.metrics[1]} against the baseline "
+                                                f"{d.metrics[0]}: {decision.reason}")
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",

@@ -109,6 +109,8 @@ def test_decide_reads_the_study_rows():
                          "converged": rng.random(200) < 0.99})
     assert decide(declaration(), VOCABULARY, rows, {}).verdict == "reproduced"
     assert decide(declaration(direction="decrease"), VOCABULARY, rows, {}).verdict == "differs"
+    assert decide(declaration(), VOCABULARY, rows, {}).reason.startswith(   # which is the baseline
+        "time_s_200kmh against the baseline time_s_60kmh: relative change +0.3 ")
     small = decide(declaration(), VOCABULARY, rows.iloc[:50], {}, size=197)
     assert small.verdict == "undecided" and "50 records of the 197 registered" in small.reason
     rate = declaration(word_class="absolute", metrics=["converged"], direction="")
