@@ -51,7 +51,11 @@ def _is_worker() -> bool:
 #: How much lower the test workers' scheduling priority is than the quick book's: on two cores the
 #: book then gets a core of its own while the workers share the other, and it is done before the
 #: modules that read it would wait for it.  Only where the book's process may take its priority
-#: back (root, or CAP_SYS_NICE); otherwise every process keeps the priority it had.
+#: back (root, or CAP_SYS_NICE); otherwise every process keeps the priority it had.  Where Linux
+#: groups CPU time by session (``/proc/sys/kernel/sched_autogroup_enabled``, on here), niceness
+#: only orders processes within a session: the book runs in a session of its own, and so does
+#: every notebook kernel (jupyter_client starts each in a new session), so a kernel a test starts
+#: while the book builds competes with the book's kernel as an equal, whatever its niceness.
 WORKER_NICENESS = 5
 
 
