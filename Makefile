@@ -51,7 +51,7 @@ $(KERNELS): $(BIN)/railpaper $(shell find railpaper -name '*.py')
 	touch $(KERNELS)
 
 test: venv chromium $(KERNELS)
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder
 
 # Regenerate the hashed lock from pyproject.toml (needs uv: `pip install uv`).
 lock:

@@ -8,8 +8,9 @@ session in a background process, started as soon as a worker has collected a tes
 so it runs beside the unit tests; the modules that read it run last, and the first of them waits
 for it.
 
-``make test`` runs the tests on two pytest-xdist workers (``-n 2 --dist loadfile``: a module stays
-on one worker, with its module fixtures), so the unit tests fill both cores around the book.  The
+``make test`` runs the tests on two pytest-xdist workers (``-n 2 --dist loadfile
+--no-loadscope-reorder``: a module stays on one worker, with its module fixtures, and the modules
+are handed out in the order below), so the unit tests fill both cores around the book.  The
 workers share one book through a folder the controlling process makes (``RAILPAPER_QUICK_BOOK``):
 the first worker to claim it starts the build; every worker waits for the build's exit code file;
 the controlling process removes the folder (and stops a build still running) at the end.  A plain
@@ -31,8 +32,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 RAILPAPER = [sys.executable, "-m", "railpaper"]
-#: Fixtures that read the session's quick book.
-BOOK_FIXTURES = {"quick_book", "quick_chapter_dir", "built_book"}
+#: Fixtures that read the session's quick book, or wait for it (``after_quick_book``).
+BOOK_FIXTURES = {"quick_book", "quick_chapter_dir", "built_book", "after_quick_book"}
 #: The environment variable that hands the shared book folder to the workers.
 SHARED = "RAILPAPER_QUICK_BOOK"
 
@@ -126,8 +127,11 @@ def _start_quick_book() -> None:
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """Modules that read the quick book run last (each module's own order kept, so its module
-    fixtures are set up once): the other tests then fill the cores while the book builds."""
+    """Modules that read the quick book, or wait for it, run last (each module's own order kept,
+    so its module fixtures are set up once): the other tests then fill the cores while the book
+    builds.  ``make test`` passes ``--no-loadscope-reorder`` so that the workers take the modules
+    in this order (xdist would otherwise start with the modules that have the most tests, and a
+    worker would wait for the book from the start)."""
     reads_book = {item.module for item in items
                   if BOOK_FIXTURES & set(getattr(item, "fixturenames", ()))}
     items.sort(key=lambda item: item.module in reads_book)
@@ -166,6 +170,14 @@ def quick_book() -> Path:
     log = (root / "build.log").read_text()
     assert returncode == 0, f"quick book build failed (exit {returncode}):\n{log[-4000:]}"
     return root / "book"
+
+
+@pytest.fixture(scope="session")
+def after_quick_book(quick_book) -> None:
+    """Wait for the quick book: for tests that start notebook kernels of their own.  Each
+    kernel is a session of its own, which the scheduler weighs as much as both test workers
+    together (see :data:`WORKER_NICENESS`), so kernels started while the book builds slow the
+    book, the suite's longest chain."""
 
 
 @pytest.fixture(scope="session")

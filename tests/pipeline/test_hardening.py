@@ -391,7 +391,7 @@ def _processes_in(folder: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(tmp_path_factory, after_quick_book):
     """Real runs of the chapter, at the same time: a first run; a second run into the same
     directory while the first runs; two runs over previous outputs, interrupted by SIGINT and
     SIGTERM once their kernels execute cells."""
