@@ -374,7 +374,9 @@ def declared_rows(chapter: str, out: Path, run: dict | None, timings: dict | Non
         verdict = verdict or decision.verdict
         paper = (", ".join(f"{v:g}" for v in d.paper_value) if d.paper_value
                  else d.direction or "(no number)")
-        ours = ("—" if decision.statistic is None else f"{decision.statistic:.3g}" + (
+        # a single-run row's statistic is the depth test's p-value, not a number of ours: say so
+        label = "depth-test p = " if d.procedure == "single-run" else ""
+        ours = ("—" if decision.statistic is None else f"{label}{decision.statistic:.3g}" + (
             f" [{decision.low:.3g}, {decision.high:.3g}]" if decision.low is not None else "")
             + (f", n = {decision.n}" if decision.n else ""))
         revised, original = "", ""
