@@ -71,8 +71,8 @@ from railpaper.threads import one_thread
 #: toy and the paper-scheme RBPF at ``JUDGED_PARTICLES``, which only the stored decisive
 #: evidence holds (a run does not compute them).
 STUDIES = (TOY, posterior.TOY_CALIBRATION, lateral.PAPER_SCHEME, lateral.WORKING_SCHEME,
-           lateral.EKF, MODEL_ERROR, soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR, TOY_JUDGED,
-           lateral.PAPER_SCHEME_JUDGED)
+           lateral.EKF, MODEL_ERROR, soundness.TOY_POSTERIOR, soundness.LATERAL_POSTERIOR,
+           TOY_JUDGED, lateral.PAPER_SCHEME_JUDGED)
 
 __all__ = ["SPEC", "STUDIES", "Settings", "run", "validate"]
 

@@ -135,7 +135,7 @@ def toy_posteriors(settings: Settings, part: ToyPart, record_map: RecordMap = ma
     :attr:`ToyPart.record`, :attr:`~ToyPart.posterior` (the illustrated record) and
     :attr:`~ToyPart.coverage` (one row per record × parameter) filled."""
     n_records = min(settings.toy_ibis_records, settings.toy_seeds)
-    sim = toy.simulate(settings, np.random.default_rng(settings.seed))  # the record run_toy filtered
+    sim = toy.simulate(settings, np.random.default_rng(settings.seed))  # run_toy's record
     post = toy_posterior(settings, sim, settings.seed)
     wide = normalised(pd.DataFrame([_calibration_row(settings.seed, post, part.truth)]))
     if n_records > 1:
