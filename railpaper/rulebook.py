@@ -384,6 +384,25 @@ def not_the_papers(decision: Decision, why: str) -> Decision:
     return attainable(decision, why)
 
 
+def measured_only(decision: Decision, why: str) -> Decision:
+    """A claim whose only evidence in the paper is data measured on a physical vehicle, line or
+    rig that the book cannot obtain or regenerate (procedure version 6): *not testable*,
+    whatever our simulated records give; their statistic stays shown, and the readings that
+    simulate the claim are rows of their own beside it.
+
+    >>> measured_only(Decision("reproduced", "within 5 % on 597 of 597"), "one line record"
+    ...               ).verdict
+    'not testable'
+    """
+    return dataclasses.replace(decision, verdict="not testable", reason=(
+        f"{MEASURED_ONLY} ({why}); our simulated records, beside it, gave: {decision.verdict}, "
+        f"{decision.reason}"))
+
+
+#: How :func:`measured_only`'s reason opens (the ledger's plain sentence reads it).
+MEASURED_ONLY = "the paper's only evidence is measured data the book cannot obtain or regenerate"
+
+
 def deterministic(value: float, paper_value: float, resolution: float = 0.0) -> Decision:
     """An exact quantity: *reproduced* when ``|value − paper_value| ≤ resolution / 2`` (the
     paper's printed precision), else *differs*."""
@@ -478,5 +497,5 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
 __all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
            "clopper_pearson", "continuous_size", "cost_ratio", "departure", "deterministic",
            "design", "equivalence", "implementation", "mid_rank_tail", "most_favourable",
-           "paired_change", "population_rate", "rate_size", "relative_change",
+           "MEASURED_ONLY", "measured_only", "paired_change", "population_rate", "rate_size", "relative_change",
            "relative_change_sd", "single_run", "single_run_size", "soundness"]

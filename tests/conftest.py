@@ -132,9 +132,9 @@ def pytest_collection_modifyitems(session, config, items):
     builds.  ``make test`` passes ``--no-loadscope-reorder`` so that the workers take the modules
     in this order (xdist would otherwise start with the modules that have the most tests, and a
     worker would wait for the book from the start)."""
-    reads_book = {item.module for item in items
+    reads_book = {getattr(item, "module", None) for item in items    # a doctest has none
                   if BOOK_FIXTURES & set(getattr(item, "fixturenames", ()))}
-    items.sort(key=lambda item: item.module in reads_book)
+    items.sort(key=lambda item: getattr(item, "module", None) in reads_book)
 
 
 def pytest_collection_finish(session):

@@ -230,3 +230,11 @@ def test_paired_change_shows_the_signed_change_whatever_the_claimed_direction():
     decision = paired_change([1.0, 1.0, 1.0, 1.0], [3.2, 3.3, 3.2, 3.26], "decrease", 0.1)
     assert decision.verdict == "differs"
     assert decision.statistic == pytest.approx(2.24) and decision.low < 2.24 < decision.high
+
+
+def test_measured_only_is_not_testable_and_keeps_what_the_simulation_gave():
+    simulated = rulebook.Decision("reproduced", "597 of 597 within 5 %", 1.0, 0.99, 1.0, 597)
+    decision = rulebook.measured_only(simulated, "one line record")
+    assert decision.verdict == "not testable"
+    assert (decision.statistic, decision.low, decision.high, decision.n) == (1.0, 0.99, 1.0, 597)
+    assert "one line record" in decision.reason and "reproduced, 597 of 597" in decision.reason

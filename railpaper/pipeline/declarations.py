@@ -216,8 +216,9 @@ def registered_size(declaration: Declaration, vocabulary: Vocabulary,
 def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | None) -> str:
     """SHA-256 (first 16 hex digits) of the canonical declaration, the vocabulary entries it
     reads, the procedures' version, the registered size and (from version 4) whether its
-    reading's method is not the paper's (:func:`method_not_the_papers`) and (from version 5)
-    whether that reading is a yardstick (:func:`chapter_yardsticks`)."""
+    reading's method is not the paper's (:func:`method_not_the_papers`), (from version 5)
+    whether that reading is a yardstick (:func:`chapter_yardsticks`) and (from version 6)
+    whether the claim rests only on measured data the book lacks (:func:`chapter_measured`)."""
     payload = {"declaration": declaration.canonical(),
                "vocabulary": vocabulary_entries(declaration, vocabulary),
                "procedure_version": vocabulary.policy["procedure_version"], "size": size}
@@ -225,6 +226,8 @@ def fingerprint(declaration: Declaration, vocabulary: Vocabulary, size: int | No
         payload["method_not_the_papers"] = method_not_the_papers(declaration)
     if vocabulary.policy["procedure_version"] >= 5:     # ... and whether it is a yardstick
         payload["yardstick"] = is_yardstick(declaration)
+    if vocabulary.policy["procedure_version"] >= 6:     # ... and whether it rests on data we lack
+        payload["measured_only"] = measured_evidence(declaration)
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -352,6 +355,27 @@ def chapter_yardsticks(chapter: str, data_dir: Path = DATA_DIR) -> frozenset[str
     return frozenset(_methods_table(chapter, Path(data_dir)).get("yardstick", []))
 
 
+def chapter_measured(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
+    """``{row id: why}`` of the chapter's rows whose claim rests only on data measured on a
+    physical vehicle, line or rig that the book cannot obtain or regenerate (the list
+    ``measured`` of its methods file, with ``[measured_why]``; declared blind,
+    ``data/rbpf-parameter-estimation/blind/conditions_brief.md``)."""
+    table = _methods_table(chapter, Path(data_dir))
+    why = table.get("measured_why", {})
+    missing = [r for r in table.get("measured", []) if r not in why]
+    if missing:
+        raise DataError(f"{Path(data_dir) / chapter / METHODS_FILE}: row {missing[0]!r} is "
+                        "listed as measured without a 'measured_why'")
+    return {row: why[row] for row in table.get("measured", [])}
+
+
+def measured_evidence(d: Declaration, measured: dict[str, str] | None = None) -> str:
+    """Why the row's claim rests only on measured data the book lacks ('' when it does not):
+    its id looked up in ``measured`` (the chapter's :func:`chapter_measured` by default)."""
+    measured = chapter_measured(d.chapter) if measured is None else measured
+    return measured.get(d.id, "")
+
+
 def method_not_the_papers(d: Declaration, methods: dict[str, str] | None = None) -> str:
     """Why the row's numbers come from a method that is not the paper's ('' when they come from
     the paper's own): its id, else its reading (``as stated`` when it has none), looked up in
@@ -373,8 +397,12 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
            procedure_version: int | None = None,
            estimator_of: Callable[[str], str | None] | None = None,
            methods: dict[str, str] | None = None,
-           yardsticks: frozenset[str] | None = None) -> Decision:
-    """The row's verdict by its class's procedure (:func:`decide_procedure`); from version 4 a
+           yardsticks: frozenset[str] | None = None,
+           measured: dict[str, str] | None = None) -> Decision:
+    """The row's verdict by its class's procedure (:func:`decide_procedure`); from version 6 a
+    row whose claim rests only on measured data the book lacks (``measured``: the chapter's
+    :func:`chapter_measured` by default) is *not testable* (:func:`railpaper.rulebook.measured_only`);
+    from version 4 a
     *reproduced* whose numbers come from a method that is not the paper's (``methods``: the
     chapter's :func:`chapter_methods` by default) is *attainable*
     (:func:`railpaper.rulebook.attainable`), and from version 5 a *differs* there is *not
@@ -385,6 +413,9 @@ def decide(declaration: Declaration, vocabulary: Vocabulary, rows: pd.DataFrame 
                else procedure_version)
     decision = decide_procedure(declaration, vocabulary, rows, metrics, size, version,
                                 estimator_of)
+    lacking = measured_evidence(declaration, measured) if version >= 6 else ""
+    if lacking:
+        return rulebook.measured_only(decision, lacking)
     why = method_not_the_papers(declaration, methods) if version >= 4 else ""
     if not why:
         return decision
@@ -620,8 +651,8 @@ def _named_pair(d: Declaration, decision: Decision) -> Decision:
 
 
 __all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure",
+           "chapter_measured", "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure",
            "estimators_credited", "estimators_read", "fingerprint", "first_records", "is_yardstick",
-           "load_declarations", "load_registry", "method_not_the_papers", "parse",
+           "load_declarations", "measured_evidence", "load_registry", "method_not_the_papers", "parse",
            "procedure_reregistrations", "register", "registered_size", "revisions",
            "soundness_column", "write_registry"]

@@ -60,6 +60,7 @@ from railpaper.pipeline.soundness import (
     posterior_study,
     with_soundness,
 )
+from railpaper import rulebook
 from railpaper.rulebook import Decision, Vocabulary
 from railpaper.pipeline.outputs import claims
 
@@ -738,6 +739,10 @@ VERDICT_SENTENCES = {
                      "or the paper gives nothing to test it against"),
     "missing": "has not been judged: the chapter has not been run",
 }
+#: The plain sentence of a row *not testable* because its only evidence is measured data we lack.
+MEASURED_SENTENCE = ("cannot be tested: the paper's only evidence is data measured on a real "
+                     "vehicle or line, which the book cannot obtain (our simulated records are "
+                     "shown beside it, not counted)")
 
 
 def is_central(row: LedgerRow) -> bool:
@@ -790,16 +795,23 @@ def central_claims(rows: list[LedgerRow], context: str = "") -> str:
             continue
         claim = head.claim.rstrip(". ")
         changed = ""
-        if head.revised and head.original_verdict and head.original_verdict != head.verdict:
-            changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
-                       "came after the evidence had been seen.")
-        earlier = [v for v in sorted(head.by_version)[:-1]
-                   if head.by_version[v] != head.by_version[v + 1]]
-        if earlier and not changed:
+        versions = sorted(head.by_version)
+        earlier = [v for v in versions[:-1] if head.by_version[v] != head.by_version[v + 1]]
+        if earlier and earlier[-1] == versions[-2]:       # the current version moved it
             v = earlier[-1]
             changed = (f" It read {head.by_version[v]} under version {v} of the decision "
                        f"procedures; version {v + 1} changed it (the table of versions).")
-        lines.append(f"- The paper's claim that {claim} {VERDICT_SENTENCES[head.verdict]} "
+        elif head.revised and head.original_verdict and head.original_verdict != head.verdict:
+            changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
+                       "came after the evidence had been seen.")
+        elif earlier:
+            v = earlier[-1]
+            changed = (f" It read {head.by_version[v]} under version {v} of the decision "
+                       f"procedures; version {v + 1} changed it (the table of versions).")
+        meaning = VERDICT_SENTENCES[head.verdict]
+        if head.verdict == "not testable" and head.reason.startswith(rulebook.MEASURED_ONLY):
+            meaning = MEASURED_SENTENCE
+        lines.append(f"- The paper's claim that {claim} {meaning} "
                      f"({verdict_badge(head.verdict)}).{changed}")
     text = "\n".join(lines) + "\n" if lines else "No claim of the abstract or conclusion.\n"
     return text + context

@@ -72,7 +72,7 @@ def test_fingerprint_sees_the_declaration_the_vocabulary_it_reads_and_the_size()
     other_class = copy.deepcopy(VOCABULARY)
     other_class.classes["majority"]["threshold"] = 0.6                 # not read by this row
     assert fingerprint(d, other_class, 785) == base
-    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=6))
+    newer = dataclasses.replace(VOCABULARY, policy=dict(VOCABULARY.policy, procedure_version=7))
     assert fingerprint(d, newer, 785) != base
 
 
@@ -434,3 +434,32 @@ def test_version_5_makes_a_differs_from_our_method_not_testable():
     # a yardstick's failure (the exact posterior) bears on every estimator: it stays differs
     assert decide(fails, VOCABULARY, rows, {}, procedure_version=5, methods=methods,
                   yardsticks=frozenset({"working_scheme"})).verdict == "differs"
+
+
+def test_version_6_makes_a_row_on_measured_data_we_lack_not_testable(tmp_path):
+    """A row listed as resting only on measured data reads 'not testable' from version 6,
+    whatever the simulated records give (their verdict and statistic stay in the reason and the
+    row); an unlisted row, and the same row under version 5, are decided as before."""
+    rows = _toy_like_rows()
+    held = declaration(id="within", metrics=["rbpf_converged_init1"], study="toy", **MAJORITY)
+    measured = {"within": "one line record the book lacks"}
+    fifth = decide(held, VOCABULARY, rows, {}, procedure_version=5, measured=measured)
+    assert fifth.verdict == "reproduced"
+    sixth = decide(held, VOCABULARY, rows, {}, procedure_version=6, measured=measured)
+    assert sixth.verdict == "not testable" and sixth.statistic == fifth.statistic
+    assert "one line record the book lacks" in sixth.reason and "reproduced" in sixth.reason
+    other = dataclasses.replace(held, id="elsewhere")
+    assert decide(other, VOCABULARY, rows, {}, procedure_version=6, measured=measured
+                  ).verdict == "reproduced"
+    # before the methods rules: a measured row is not testable even if its reading is ours
+    ours = dataclasses.replace(held, reading="working_scheme")
+    assert decide(ours, VOCABULARY, rows, {}, procedure_version=6, measured=measured,
+                  methods={"working_scheme": "our RBPF"}).verdict == "not testable"
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "methods.toml").write_text(
+        'ours = []\nmeasured = ["within"]\n[measured_why]\nwithin = "a line record"\n')
+    assert declarations.chapter_measured("demo", tmp_path) == {"within": "a line record"}
+    (tmp_path / "bare").mkdir()
+    (tmp_path / "bare" / "methods.toml").write_text('ours = []\nmeasured = ["within"]\n')
+    with pytest.raises(DataError, match="'within' is listed as measured without"):
+        declarations.chapter_measured("bare", tmp_path)
