@@ -335,16 +335,23 @@ def _methods_table(chapter: str, data_dir: Path) -> dict[str, Any]:
     return tomllib.loads(path.read_text()) if path.exists() else {}
 
 
+def _listed_with_reasons(chapter: str, data_dir: Path, listed: str, reasons: str, what: str,
+                         as_what: str) -> dict[str, str]:
+    """``{name: reason}`` of the names in the methods file's list ``listed``, each with its
+    reason in the table ``reasons``; a listed name without one is a one-line error."""
+    table = _methods_table(chapter, data_dir)
+    why = table.get(reasons, {})
+    missing = [name for name in table.get(listed, []) if name not in why]
+    if missing:
+        raise DataError(f"{data_dir / chapter / METHODS_FILE}: {what} {missing[0]!r} is listed "
+                        f"as {as_what} without a '{reasons}'")
+    return {name: why[name] for name in table.get(listed, [])}
+
+
 def chapter_methods(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
     """``{reading: why}`` of the chapter's readings whose method is not the paper's (empty
     without a methods file)."""
-    table = _methods_table(chapter, Path(data_dir))
-    why = table.get("why", {})
-    missing = [r for r in table.get("ours", []) if r not in why]
-    if missing:
-        raise DataError(f"{Path(data_dir) / chapter / METHODS_FILE}: reading {missing[0]!r} is "
-                        "listed as ours without a 'why'")
-    return {reading: why[reading] for reading in table.get("ours", [])}
+    return _listed_with_reasons(chapter, Path(data_dir), "ours", "why", "reading", "ours")
 
 
 def chapter_yardsticks(chapter: str, data_dir: Path = DATA_DIR) -> frozenset[str]:
@@ -360,13 +367,8 @@ def chapter_measured(chapter: str, data_dir: Path = DATA_DIR) -> dict[str, str]:
     physical vehicle, line or rig that the book cannot obtain or regenerate (the list
     ``measured`` of its methods file, with ``[measured_why]``; declared blind,
     ``data/rbpf-parameter-estimation/blind/conditions_brief.md``)."""
-    table = _methods_table(chapter, Path(data_dir))
-    why = table.get("measured_why", {})
-    missing = [r for r in table.get("measured", []) if r not in why]
-    if missing:
-        raise DataError(f"{Path(data_dir) / chapter / METHODS_FILE}: row {missing[0]!r} is "
-                        "listed as measured without a 'measured_why'")
-    return {row: why[row] for row in table.get("measured", [])}
+    return _listed_with_reasons(chapter, Path(data_dir), "measured", "measured_why", "row",
+                                "measured")
 
 
 def measured_evidence(d: Declaration, measured: dict[str, str] | None = None) -> str:
