@@ -794,20 +794,20 @@ def central_claims(rows: list[LedgerRow], context: str = "") -> str:
         if not is_central(head):
             continue
         claim = head.claim.rstrip(". ")
-        changed = ""
         versions = sorted(head.by_version)
         earlier = [v for v in versions[:-1] if head.by_version[v] != head.by_version[v + 1]]
+        by_version = (f" It read {head.by_version[earlier[-1]]} under version {earlier[-1]} of "
+                      f"the decision procedures; version {earlier[-1] + 1} changed it (the table "
+                      "of versions)." if earlier else "")
+        revised = (head.revised and head.original_verdict
+                   and head.original_verdict != head.verdict)
         if earlier and earlier[-1] == versions[-2]:       # the current version moved it
-            v = earlier[-1]
-            changed = (f" It read {head.by_version[v]} under version {v} of the decision "
-                       f"procedures; version {v + 1} changed it (the table of versions).")
-        elif head.revised and head.original_verdict and head.original_verdict != head.verdict:
+            changed = by_version
+        elif revised:
             changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
                        "came after the evidence had been seen.")
-        elif earlier:
-            v = earlier[-1]
-            changed = (f" It read {head.by_version[v]} under version {v} of the decision "
-                       f"procedures; version {v + 1} changed it (the table of versions).")
+        else:
+            changed = by_version
         meaning = VERDICT_SENTENCES[head.verdict]
         if head.verdict == "not testable" and head.reason.startswith(rulebook.MEASURED_ONLY):
             meaning = MEASURED_SENTENCE

@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pandas as pd
 
+from railpaper import rulebook
 from railpaper.pipeline import ledger
 from railpaper.pipeline.chapters import chapter_spec
 from railpaper.pipeline.declarations import parse, register
@@ -123,6 +124,17 @@ def test_a_central_sentence_says_which_version_of_the_procedures_moved_it():
         "(the table of versions).\n")
     still = dataclasses.replace(row, verdict="differs", by_version={1: "differs", 2: "differs"})
     assert "It read" not in ledger.central_claims([still])
+    # a move by the current version is named before an earlier revision of the declaration
+    moved = dataclasses.replace(row, verdict="not testable", revised="re-registered",
+                                original_verdict="artefact",
+                                by_version={4: "artefact", 5: "reproduced", 6: "not testable"})
+    assert "It read reproduced under version 5" in ledger.central_claims([moved])
+    older = dataclasses.replace(moved, by_version={4: "artefact", 5: "not testable",
+                                                   6: "not testable"})
+    assert "It read artefact before: re-registered" in ledger.central_claims([older])
+    # a row not testable for lack of measured data says so in its sentence
+    lacking = dataclasses.replace(moved, reason=rulebook.MEASURED_ONLY + " (a line record)")
+    assert "the paper's only evidence is data measured" in ledger.central_claims([lacking])
 
 
 def test_the_headline_counts_a_declared_attainable_as_attainable():
