@@ -494,8 +494,8 @@ def single_run_size(alpha: float, resolution: float, level: float = 0.95,
     return rate_size(alpha, resolution, level, power)
 
 
-__all__ = ["DIRECTIONS", "Decision", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE", "Vocabulary",
-           "clopper_pearson", "continuous_size", "cost_ratio", "departure", "deterministic",
-           "design", "equivalence", "implementation", "mid_rank_tail", "most_favourable",
-           "MEASURED_ONLY", "measured_only", "paired_change", "population_rate", "rate_size", "relative_change",
-           "relative_change_sd", "single_run", "single_run_size", "soundness"]
+__all__ = ["DIRECTIONS", "Decision", "MEASURED_ONLY", "PROCEDURES", "VERDICTS", "VOCABULARY_FILE",
+           "Vocabulary", "clopper_pearson", "continuous_size", "cost_ratio", "departure",
+           "deterministic", "design", "equivalence", "implementation", "measured_only",
+           "mid_rank_tail", "most_favourable", "paired_change", "population_rate", "rate_size",
+           "relative_change", "relative_change_sd", "single_run", "single_run_size", "soundness"]

@@ -652,9 +652,9 @@ def _named_pair(d: Declaration, decision: Decision) -> Decision:
                                                 f"{d.metrics[0]}: {decision.reason}")
 
 
-__all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "check_registry",
-           "chapter_measured", "chapter_methods", "chapter_yardsticks", "decide", "decide_procedure",
+__all__ = ["Declaration", "FORBIDDEN_KEYS", "KINDS", "REGISTRY_FILE", "chapter_measured",
+           "chapter_methods", "chapter_yardsticks", "check_registry", "decide", "decide_procedure",
            "estimators_credited", "estimators_read", "fingerprint", "first_records", "is_yardstick",
-           "load_declarations", "measured_evidence", "load_registry", "method_not_the_papers", "parse",
-           "procedure_reregistrations", "register", "registered_size", "revisions",
+           "load_declarations", "load_registry", "measured_evidence", "method_not_the_papers",
+           "parse", "procedure_reregistrations", "register", "registered_size", "revisions",
            "soundness_column", "write_registry"]

@@ -799,15 +799,12 @@ def central_claims(rows: list[LedgerRow], context: str = "") -> str:
         by_version = (f" It read {head.by_version[earlier[-1]]} under version {earlier[-1]} of "
                       f"the decision procedures; version {earlier[-1] + 1} changed it (the table "
                       "of versions)." if earlier else "")
-        revised = (head.revised and head.original_verdict
-                   and head.original_verdict != head.verdict)
-        if earlier and earlier[-1] == versions[-2]:       # the current version moved it
-            changed = by_version
-        elif revised:
+        changed = by_version
+        current_moved = bool(earlier) and earlier[-1] == versions[-2]
+        if (not current_moved and head.revised and head.original_verdict
+                and head.original_verdict != head.verdict):      # a revision of the declaration
             changed = (f" It read {head.original_verdict} before: {head.revised}; the change "
                        "came after the evidence had been seen.")
-        else:
-            changed = by_version
         meaning = VERDICT_SENTENCES[head.verdict]
         if head.verdict == "not testable" and head.reason.startswith(rulebook.MEASURED_ONLY):
             meaning = MEASURED_SENTENCE
