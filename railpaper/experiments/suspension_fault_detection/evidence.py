@@ -12,12 +12,15 @@ Definitions (times in s from the record's start):
   window, times 3600 / window length — the rate of rare, independent alarms;
 * *delay*: alarm time − fault time for a record without an alarm before its fault; a record
   that is never alarmed (or cut at flange contact first) has an infinite delay, so the median
-  is censored (−1: beyond the record) where fewer than half the records are alarmed;
+  is beyond the record where fewer than half the records are alarmed (then no number is
+  written: ``delay_median_reached_<tag>`` is False);
 * *detected within d*: the alarm falls in (τ, τ + d]; a record alarmed before its fault, never,
   or cut at flange contact before τ + d without an alarm is not.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -68,15 +71,55 @@ def alarm_time_s(statistic: np.ndarray, h: float, first_row: int, dt_s: float) -
     return float((first_row + row + 1) * dt_s) if row >= 0 else np.inf
 
 
-def censored_median(delays) -> tuple[float, float, float]:
-    """Median of delays that may be infinite (never alarmed) and its distribution-free 95 %
-    interval [x_(l), x_(u)] (:func:`railpaper.stats.quantile_ranks`; order statistics stay valid
-    under censoring); an infinite value is reported as −1 ("beyond the record")."""
-    x = np.sort(np.asarray(delays, float))
+@dataclass(frozen=True)
+class CensoredMedian:
+    """The median of values that may be infinite (a record never alarmed, or never reaching
+    flange contact) and its distribution-free 95 % interval [x_(l), x_(u)]
+    (:func:`railpaper.stats.quantile_ranks`; order statistics stay valid under censoring).
+    An end beyond the record is ``None``, never a number standing for it.
+
+    Attributes
+    ----------
+    median, low, high : float or None
+        s; ``None`` where the order statistic is infinite ("beyond the record").
+    n : int
+        Values (records).
+    """
+
+    median: float | None
+    low: float | None
+    high: float | None
+    n: int
+
+    def metrics(self, prefix: str, tag: str) -> dict:
+        """``<prefix>_s_<tag>`` with ``_low``/``_high`` where they lie within the record, and
+        the separate fields ``<prefix>_reached_<tag>`` (the median lies within it) and
+        ``<prefix>_high_bounded_<tag>`` (so does the interval's upper end)."""
+        m = {f"{prefix}_reached_{tag}": self.median is not None,
+             f"{prefix}_high_bounded_{tag}": self.high is not None}
+        for tail, value in (("", self.median), ("_low", self.low), ("_high", self.high)):
+            if value is not None:
+                m[f"{prefix}_s_{tag}{tail}"] = value
+        return m
+
+
+def censored_median(values) -> CensoredMedian:
+    """The :class:`CensoredMedian` of ``values`` (inf: beyond the record)."""
+    x = np.sort(np.asarray(values, float))
     n = x.size
     low, high = quantile_ranks(n, 0.5)
     med = x[(n - 1) // 2] if n % 2 else 0.5 * (x[n // 2 - 1] + x[n // 2])
-    return tuple(float(v) if np.isfinite(v) else -1.0 for v in (med, x[low - 1], x[high - 1]))
+    kept = [float(v) if np.isfinite(v) else None for v in (med, x[low - 1], x[high - 1])]
+    return CensoredMedian(*kept, n=n)
+
+
+def read_censored_median(metrics: dict, prefix: str, tag: str) -> CensoredMedian | None:
+    """What :meth:`CensoredMedian.metrics` wrote, read back (``None``: not computed, e.g. a
+    detector not run at that speed)."""
+    if f"{prefix}_reached_{tag}" not in metrics:
+        return None
+    values = [metrics.get(f"{prefix}_s_{tag}{tail}") for tail in ("", "_low", "_high")]
+    return CensoredMedian(*values, n=int(metrics.get(f"{prefix}_s_{tag}_n", 0)))
 
 
 def detector_outcomes(runs: list[RecordRun], detector: str, h: float, first_row: int,
@@ -147,9 +190,8 @@ def fault_metrics(outcomes: pd.DataFrame, tag: str) -> dict:
     early = rate(outcomes["early"].to_numpy())
     m.update({f"alarm_before_fault_{tag}": early.value, f"alarm_before_fault_{tag}_low": early.low,
               f"alarm_before_fault_{tag}_high": early.high})
-    med, low, high = censored_median(delay)
-    m.update({f"delay_median_s_{tag}": med, f"delay_median_s_{tag}_low": low,
-              f"delay_median_s_{tag}_high": high, f"delay_median_s_{tag}_n": len(delay)})
+    m.update(censored_median(delay).metrics("delay_median", tag))
+    m[f"delay_median_s_{tag}_n"] = len(delay)
     m.update(survival_delay_metrics(outcomes, tag))
     return m
 
@@ -194,9 +236,7 @@ def flange_metrics(runs: list[RecordRun], tag: str) -> dict:
     """How often a fault's records reach flange contact, and how soon after the fault."""
     m = rate([r.flange_contact for r in runs]).metrics(f"flange_contact_rate_{tag}")
     times = np.array([r.end_s - r.fault_time_s if r.flange_contact else np.inf for r in runs])
-    med, low, high = censored_median(times)
-    m.update({f"flange_contact_after_s_{tag}": med, f"flange_contact_after_s_{tag}_low": low,
-              f"flange_contact_after_s_{tag}_high": high})
+    m.update(censored_median(times).metrics("flange_contact_after", tag))
     return m
 
 
@@ -277,4 +317,5 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc)
 
 
-__all__ = ["censored_median", "evidence", "threshold", "window_rows"]
+__all__ = ["CensoredMedian", "censored_median", "evidence", "read_censored_median", "threshold",
+           "window_rows"]

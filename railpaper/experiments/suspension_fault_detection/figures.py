@@ -15,6 +15,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from railpaper.experiments.display import number
+from railpaper.experiments.suspension_fault_detection.evidence import read_censored_median
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
 from railpaper.experiments.suspension_fault_detection.tables import (
@@ -135,22 +136,23 @@ def record_around_fault(result, settings: Settings):
     return fig
 
 
-def _delay_point(ax, x, metrics, key, beyond, colour, marker) -> bool:
-    """One detector's median delay with its interval at ``x``; True when something is drawn."""
-    if key not in metrics:
+def _delay_point(ax, x, metrics, tag, beyond, colour, marker) -> bool | None:
+    """One detector's median delay with its interval at ``x`` (an end beyond the record drawn
+    at ``beyond``); None when the detector did not run, else whether the median lies beyond."""
+    median = read_censored_median(metrics, "delay_median", tag)
+    if median is None:
+        return None
+    low_y = median.low if median.low is not None and median.low > 0 else beyond
+    high_y = median.high if median.high is not None else beyond
+    if median.median is not None and median.median > 0:
+        med = median.median
+        ax.errorbar([x], [med], yerr=[[med - min(low_y, med)], [high_y - med]], fmt=marker,
+                    color=colour, ms=5, capsize=2, lw=1.0)
+        if median.high is None:
+            ax.plot([x], [beyond], marker="^", ms=4, color=colour, ls="none")
         return False
-    med, low, high = (metrics[key], metrics.get(key + "_low", -1.0),
-                      metrics.get(key + "_high", -1.0))
-    low_y = low if low > 0 else beyond
-    high_y = high if high > 0 else beyond
-    if med > 0:
-        ax.errorbar([x], [med], yerr=[[med - low_y], [high_y - med]], fmt=marker, color=colour,
-                    ms=5, capsize=2, lw=1.0)
-    else:
-        ax.vlines(x, low_y, beyond, color=colour, lw=1.0, ls=":")
-        ax.plot([x], [beyond], marker="^", ms=7, mfc="white", mec=colour, ls="none")
-    if high < 0 and med > 0:
-        ax.plot([x], [beyond], marker="^", ms=4, color=colour, ls="none")
+    ax.vlines(x, low_y, beyond, color=colour, lw=1.0, ls=":")
+    ax.plot([x], [beyond], marker="^", ms=7, mfc="white", mec=colour, ls="none")
     return True
 
 
@@ -174,14 +176,15 @@ def delay_by_fault(result, settings: Settings):
         for i, f in enumerate(result.faults):
             for det in DETECTORS:
                 colour, marker = DETECTOR_STYLES[det]
-                key = f"delay_median_s_{det}_{f.name}_{sk}"
-                if _delay_point(ax, i + offsets[det], m, key, beyond, colour, marker):
+                point = _delay_point(ax, i + offsets[det], m, f"{det}_{f.name}_{sk}", beyond,
+                                     colour, marker)
+                if point is not None:
                     drawn.add(det)
                     ran.append(det)
-                    censored |= m[key] < 0
+                    censored |= point
             rate = m.get(f"flange_contact_rate_{f.name}_{sk}", 0.0)
-            after = m.get(f"flange_contact_after_s_{f.name}_{sk}", -1.0)
-            if rate > 0 and after >= 0:
+            after = m.get(f"flange_contact_after_s_{f.name}_{sk}")
+            if rate > 0 and after is not None:
                 ax.hlines(max(after, result.dt_s), i - 0.4, i + 0.4, color="grey", lw=2.5,
                           alpha=0.7)
                 flange = True

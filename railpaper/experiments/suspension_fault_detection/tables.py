@@ -4,9 +4,9 @@ false alarms and post-fault estimates, and the short names of faults and detecto
 figures share.
 
 Every function takes the run's :class:`FaultDetectionResult` (and its settings) and returns
-Markdown: numbers to four significant digits, "beyond the record"
-for the −1 of a median delay that no record reached, "—" where a detector has no metric (the RBPF
-runs only at the first speed).
+Markdown: numbers to four significant digits, "beyond the record" for a median delay (or an
+interval end) that lies beyond it (``delay_median_reached_<tag>`` False: no number is written),
+"—" where a detector has no metric (the RBPF runs only at the first speed).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from __future__ import annotations
 import pandas as pd
 
 from railpaper.experiments.display import markdown, number
+from railpaper.experiments.suspension_fault_detection.evidence import read_censored_median
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault, speed_key
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
@@ -56,9 +57,21 @@ def percent(ratio: float) -> str:
     return f"{number(100 * ratio, 3)} %"
 
 
-def delay_text(value: float) -> str:
-    """A delay in s, or "beyond the record" for the −1 of a censored one."""
-    return "beyond the record" if value < 0 else number(value)
+def delay_text(value: float | None) -> str:
+    """A delay in s, or "beyond the record" for an end that lies beyond it (``None``)."""
+    return "beyond the record" if value is None else number(value)
+
+
+def delay_cell(metrics: dict, tag: str) -> str:
+    """``median [low, high]`` of one detector's delays on one fault (s; "beyond the record" /
+    "beyond" where an order statistic lies beyond it); NONE when the detector did not run."""
+    median = read_censored_median(metrics, "delay_median", tag)
+    if median is None:
+        return NONE
+
+    def end(x: float | None) -> str:
+        return "beyond" if x is None else number(clean(x))
+    return f"{delay_text(median.median)} [{end(median.low)}, {end(median.high)}]"
 
 
 def clean(value: float) -> float:
@@ -66,17 +79,13 @@ def clean(value: float) -> float:
     return 0.0 if abs(value) < 1e-12 else value
 
 
-def interval_text(metrics: dict, key: str, show=number, censored: bool = False) -> str:
-    """``value [low, high]`` of a metric with its 95 % interval (``censored``: a −1 is "beyond
-    the record" as the value, "beyond" as an interval end); NONE when it is missing."""
+def interval_text(metrics: dict, key: str, show=number) -> str:
+    """``value [low, high]`` of a metric with its 95 % interval; NONE when it is missing."""
     if key not in metrics:
         return NONE
     nan = float("nan")
     value, low, high = (clean(metrics.get(key + tail, nan)) for tail in ("", "_low", "_high"))
-
-    def end(x: float) -> str:
-        return "beyond" if censored and x < 0 else show(x)
-    return f"{show(value)} [{end(low)}, {end(high)}]"
+    return f"{show(value)} [{show(low)}, {show(high)}]"
 
 
 def faults_table(result) -> str:
@@ -128,8 +137,7 @@ def detection_table(result, settings: Settings) -> str:
             row = [f.label]
             for det in DETECTORS:
                 tag = f"{det}_{f.name}_{sk}"
-                delay = interval_text(result.metrics, f"delay_median_s_{tag}", delay_text,
-                                      censored=True)
+                delay = delay_cell(result.metrics, tag)
                 a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
                 b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
                 row.append(delay if a is None or b is None
@@ -198,6 +206,6 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
     return ", ".join(parts) if parts else "no fault-free records"
 
 
-__all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "clean", "delay_text",
+__all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "clean", "delay_cell", "delay_text",
            "detection_table", "estimate_table", "false_alarm_table", "fault_free_flange_text",
            "fault_short_label", "faults_table", "interval_text", "percent"]

@@ -19,8 +19,10 @@ def test_outputs_complete(quick_chapter_dir):
     metrics = json.loads((out / "metrics.json").read_text())["metrics"]
     for det in ("residual", "exact", "rbpf"):
         assert f"false_alarms_per_hour_{det}_300kmh" in metrics
-        assert f"delay_median_s_{det}_csaly_0_300kmh" in metrics
+        assert f"delay_median_reached_{det}_csaly_0_300kmh" in metrics
     assert "false_alarms_per_hour_rbpf_200kmh" not in metrics          # RBPF: first speed only
+    assert not [k for k, v in metrics.items()                          # no number for "never"
+                if k.startswith(("delay_median_s_", "flange_contact_after_s_")) and v < 0]
     for row in read_findings(CHAPTER).values():
         assert {row["metric"], row["n_samples"], *row["interval"]} <= set(metrics)
     ts = pd.read_csv(out / "timeseries.csv")

@@ -149,11 +149,12 @@ def test_threshold_allows_at_most_the_false_alarm_probability():
 def test_censored_median_is_the_order_statistic_median():
     rng = np.random.default_rng(6)
     x = rng.exponential(size=31)
-    med, low, high = evidence.censored_median(x)
-    assert med == np.median(x) and low <= med <= high
+    median = evidence.censored_median(x)
+    assert median.median == np.median(x) and median.low <= median.median <= median.high
     y = np.concatenate([x[:20], np.full(11, np.inf)])               # 11 of 31 never alarmed
-    assert evidence.censored_median(y)[0] == np.sort(y)[15]
-    assert evidence.censored_median(np.full(5, np.inf)) == (-1.0, -1.0, -1.0)
+    assert evidence.censored_median(y).median == np.sort(y)[15]
+    never = evidence.censored_median(np.full(5, np.inf))
+    assert (never.median, never.low, never.high, never.n) == (None, None, None, 5)
 
 
 def test_drift_schedule_ends_at_its_factor(setup):

@@ -64,3 +64,29 @@ def test_fault_free_flange_contacts_counted_by_hand():
     assert fault_free_flange_text(m, [300.0, 200.0]) == \
         "1 of 5 records at 300 km/h, 0 of 2 at 200 km/h"
     assert fault_free_flange_text({}, [300.0]) == "no fault-free records"
+
+
+def test_a_median_beyond_the_record_is_a_field_not_a_number():
+    """Nine records' delays, four never alarmed (inf): sorted 0.1 … 0.5, inf × 4; the median is
+    the 5th (0.5 s) and the distribution-free 95 % interval the 2nd and 8th order statistics
+    (P(2 <= Bin(9, 1/2) <= 7) = 1 - 2 (1 + 9) / 512 = 0.961), so its upper end lies beyond the
+    record: no number for it, a False flag instead. With six never alarmed the median itself
+    lies beyond."""
+    import numpy as np
+
+    from railpaper.experiments.suspension_fault_detection.evidence import (
+        censored_median,
+        read_censored_median,
+    )
+
+    inf = np.inf
+    median = censored_median([0.3, 0.1, inf, 0.2, inf, 0.5, 0.4, inf, inf])
+    assert (median.median, median.low, median.high, median.n) == (0.5, 0.2, None, 9)
+    m = median.metrics("delay_median", "x")
+    assert m == {"delay_median_reached_x": True, "delay_median_high_bounded_x": False,
+                 "delay_median_s_x": 0.5, "delay_median_s_x_low": 0.2}
+    assert read_censored_median(dict(m, delay_median_s_x_n=9), "delay_median", "x") == median
+    beyond = censored_median([0.3, 0.1, inf, 0.2, inf, inf, inf, inf, inf]).metrics("d", "y")
+    assert beyond == {"d_reached_y": False, "d_high_bounded_y": False, "d_s_y_low": 0.2}
+    assert read_censored_median({}, "delay_median", "x") is None
+    assert censored_median([0.3, 0.2, 0.1, 0.4, 0.5]).metrics("d", "z")["d_s_z"] == 0.3
