@@ -20,14 +20,13 @@ Definitions (times in s from the record's start):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pandas as pd
 
 from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
+    CensoredMedian,
     RecordRun,
     speed_key,
 )
@@ -71,38 +70,6 @@ def alarm_time_s(statistic: np.ndarray, h: float, first_row: int, dt_s: float) -
     return float((first_row + row + 1) * dt_s) if row >= 0 else np.inf
 
 
-@dataclass(frozen=True)
-class CensoredMedian:
-    """The median of values that may be infinite (a record never alarmed, or never reaching
-    flange contact) and its distribution-free 95 % interval [x_(l), x_(u)]
-    (:func:`railpaper.stats.quantile_ranks`; order statistics stay valid under censoring).
-    An end beyond the record is ``None``, never a number standing for it.
-
-    Attributes
-    ----------
-    median, low, high : float or None
-        s; ``None`` where the order statistic is infinite ("beyond the record").
-    n : int
-        Values (records).
-    """
-
-    median: float | None
-    low: float | None
-    high: float | None
-    n: int
-
-    def metrics(self, prefix: str, tag: str) -> dict:
-        """``<prefix>_s_<tag>`` with ``_low``/``_high`` where they lie within the record, and
-        the separate fields ``<prefix>_reached_<tag>`` (the median lies within it) and
-        ``<prefix>_high_bounded_<tag>`` (so does the interval's upper end)."""
-        m = {f"{prefix}_reached_{tag}": self.median is not None,
-             f"{prefix}_high_bounded_{tag}": self.high is not None}
-        for tail, value in (("", self.median), ("_low", self.low), ("_high", self.high)):
-            if value is not None:
-                m[f"{prefix}_s_{tag}{tail}"] = value
-        return m
-
-
 def censored_median(values) -> CensoredMedian:
     """The :class:`CensoredMedian` of ``values`` (inf: beyond the record)."""
     x = np.sort(np.asarray(values, float))
@@ -111,15 +78,6 @@ def censored_median(values) -> CensoredMedian:
     med = x[(n - 1) // 2] if n % 2 else 0.5 * (x[n // 2 - 1] + x[n // 2])
     kept = [float(v) if np.isfinite(v) else None for v in (med, x[low - 1], x[high - 1])]
     return CensoredMedian(*kept, n=n)
-
-
-def read_censored_median(metrics: dict, prefix: str, tag: str) -> CensoredMedian | None:
-    """What :meth:`CensoredMedian.metrics` wrote, read back (``None``: not computed, e.g. a
-    detector not run at that speed)."""
-    if f"{prefix}_reached_{tag}" not in metrics:
-        return None
-    values = [metrics.get(f"{prefix}_s_{tag}{tail}") for tail in ("", "_low", "_high")]
-    return CensoredMedian(*values, n=int(metrics.get(f"{prefix}_s_{tag}_n", 0)))
 
 
 def detector_outcomes(runs: list[RecordRun], detector: str, h: float, first_row: int,
@@ -317,5 +275,4 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc)
 
 
-__all__ = ["CensoredMedian", "censored_median", "evidence", "read_censored_median", "threshold",
-           "window_rows"]
+__all__ = ["censored_median", "evidence", "threshold", "window_rows"]

@@ -15,8 +15,11 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from railpaper.experiments.display import number
-from railpaper.experiments.suspension_fault_detection.evidence import read_censored_median
-from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, speed_key
+from railpaper.experiments.suspension_fault_detection.result import (
+    NO_FAULT,
+    read_censored_median,
+    speed_key,
+)
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
 from railpaper.experiments.suspension_fault_detection.tables import (
     DETECTOR_SHORT,

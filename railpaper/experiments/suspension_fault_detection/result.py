@@ -28,6 +28,47 @@ def speed_key(speed_kmh: float) -> str:
 
 
 @dataclass(frozen=True)
+class CensoredMedian:
+    """The median of values that may be infinite (a record never alarmed, or never reaching
+    flange contact) and its distribution-free 95 % interval [x_(l), x_(u)]
+    (:func:`railpaper.stats.quantile_ranks`; order statistics stay valid under censoring).
+    An end beyond the record is ``None``, never a number standing for it.
+
+    Attributes
+    ----------
+    median, low, high : float or None
+        s; ``None`` where the order statistic is infinite ("beyond the record").
+    n : int
+        Values (records).
+    """
+
+    median: float | None
+    low: float | None
+    high: float | None
+    n: int
+
+    def metrics(self, prefix: str, tag: str) -> dict:
+        """``<prefix>_s_<tag>`` with ``_low``/``_high`` where they lie within the record, and
+        the separate fields ``<prefix>_reached_<tag>`` (the median lies within it) and
+        ``<prefix>_high_bounded_<tag>`` (so does the interval's upper end)."""
+        m = {f"{prefix}_reached_{tag}": self.median is not None,
+             f"{prefix}_high_bounded_{tag}": self.high is not None}
+        for tail, value in (("", self.median), ("_low", self.low), ("_high", self.high)):
+            if value is not None:
+                m[f"{prefix}_s_{tag}{tail}"] = value
+        return m
+
+
+def read_censored_median(metrics: dict, prefix: str, tag: str) -> CensoredMedian | None:
+    """What :meth:`CensoredMedian.metrics` wrote, read back (``None``: not computed, e.g. a
+    detector not run at that speed)."""
+    if f"{prefix}_reached_{tag}" not in metrics:
+        return None
+    values = [metrics.get(f"{prefix}_s_{tag}{tail}") for tail in ("", "_low", "_high")]
+    return CensoredMedian(*values, n=int(metrics.get(f"{prefix}_s_{tag}_n", 0)))
+
+
+@dataclass(frozen=True)
 class Fault:
     """One fault of ``data/suspension-fault-detection/faults.toml`` (or the user's own).
 
@@ -178,5 +219,5 @@ class FaultDetectionResult(ChapterResult):
                 and (detector is None or detector in r.statistics)]
 
 
-__all__ = ["NO_FAULT", "Fault", "FaultDetectionResult", "IllustratedRecord", "RecordRun",
-           "speed_key"]
+__all__ = ["NO_FAULT", "CensoredMedian", "Fault", "FaultDetectionResult", "IllustratedRecord",
+           "RecordRun", "read_censored_median", "speed_key"]

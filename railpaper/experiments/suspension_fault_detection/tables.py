@@ -14,8 +14,12 @@ from __future__ import annotations
 import pandas as pd
 
 from railpaper.experiments.display import markdown, number
-from railpaper.experiments.suspension_fault_detection.evidence import read_censored_median
-from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault, speed_key
+from railpaper.experiments.suspension_fault_detection.result import (
+    NO_FAULT,
+    Fault,
+    read_censored_median,
+    speed_key,
+)
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
     WITHIN_S,

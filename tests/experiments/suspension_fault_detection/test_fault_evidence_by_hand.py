@@ -74,10 +74,8 @@ def test_a_median_beyond_the_record_is_a_field_not_a_number():
     lies beyond."""
     import numpy as np
 
-    from railpaper.experiments.suspension_fault_detection.evidence import (
-        censored_median,
-        read_censored_median,
-    )
+    from railpaper.experiments.suspension_fault_detection.evidence import censored_median
+    from railpaper.experiments.suspension_fault_detection.result import read_censored_median
 
     inf = np.inf
     median = censored_median([0.3, 0.1, inf, 0.2, inf, 0.5, 0.4, inf, inf])
