@@ -24,7 +24,9 @@ particle, Liu–West moves); ``grid_posterior`` the exact posterior of a low-dim
 grid; ``run_ibis`` the exact posterior of any θ by IBIS; ``run_qgrbpf`` paper 004's
 quasi-Gaussian RBPF; ``change_likelihoods`` and ``change_posterior`` the exact posterior of an
 abrupt parameter change (when, and to which value), ``change_statistics`` its mixture
-Shiryaev–Roberts statistic and window-limited GLR; ``whitened_innovations``,
+Shiryaev–Roberts statistic and window-limited GLR, ``windowed_change_statistics`` the same two
+with a change possible at every step (a ring of filters that live while their change is in the
+window); ``whitened_innovations``,
 ``cusum_variance`` and ``glr_mean_shift`` the classical residual test of one
 (:mod:`~railpaper.engine.residual_alarms`).  The parts: :mod:`~railpaper.engine.kalman` (the
 numpy reference step, Joseph update), :mod:`~railpaper.engine.kalman_bank` (the compiled bank
@@ -45,8 +47,9 @@ block length ``BLOCK`` is ``ZOH_BLOCK``.
 
 from railpaper.engine.batch_expm import zoh_stack
 from railpaper.engine.changepoint import (ChangeLikelihoods, ChangePosterior,
-                                         ChangeStatistics, change_likelihoods,
-                                         change_posterior, change_statistics)
+                                         ChangeStatistics, WindowedChangeStatistics,
+                                         change_likelihoods, change_posterior,
+                                         change_statistics, windowed_change_statistics)
 from railpaper.engine.crlb import crlb_std, fisher_information
 from railpaper.engine.grid_posterior import GridPosterior, grid_posterior
 from railpaper.engine.ibis import IBISRun, credible_interval_covers, run_ibis
@@ -69,15 +72,16 @@ from railpaper.engine.sparse_zoh import BLOCK as ZOH_BLOCK
 from railpaper.engine.sparse_zoh import AffineZOH, affine_balance, term_counts, zoh_sparse
 from railpaper.engine.sparse_zoh import multiply_adds as zoh_multiply_adds
 
-__all__ = ["AffineSystem", "AffineZOH", "ChangeLikelihoods", "ChangePosterior",
-           "ChangeStatistics", "FilterRun", "GridPosterior", "IBISRun", "Innovations", "LOG_2PI", "LinearGaussianBatch",
-           "LinearGaussianSystem", "QuasiGaussianRBPF", "RaoBlackwellisedPF", "StepEstimate",
-           "ZOH_BLOCK", "adaptive_metropolis", "affine_balance", "bank_multiply_adds",
-           "change_likelihoods", "change_posterior", "change_statistics",
-           "credible_interval_covers", "crlb_std",
+__all__ = ["AffineSystem", "AffineZOH", "ChangeLikelihoods", "ChangePosterior", "ChangeStatistics",
+           "FilterRun", "GridPosterior", "IBISRun", "Innovations", "LOG_2PI",
+           "LinearGaussianBatch", "LinearGaussianSystem", "QuasiGaussianRBPF",
+           "RaoBlackwellisedPF", "StepEstimate", "WindowedChangeStatistics", "ZOH_BLOCK",
+           "adaptive_metropolis", "affine_balance", "bank_multiply_adds", "change_likelihoods",
+           "change_posterior", "change_statistics", "credible_interval_covers", "crlb_std",
            "cusum_variance", "effective_sample_size", "first_alarm", "fisher_information",
            "glr_mean_shift", "grid_posterior", "kalman_log_posterior", "kalman_run", "kalman_step",
            "kernel_array", "liu_west_move", "measurement_pattern", "mixture_moments",
            "normalise_log_weights", "predict", "run_filter", "run_ibis", "run_qgrbpf", "run_rbpf",
            "systematic_resample", "term_counts", "update", "weighted_mean_cov",
-           "whitened_innovations", "zoh_multiply_adds", "zoh_sparse", "zoh_stack"]
+           "whitened_innovations", "windowed_change_statistics", "zoh_multiply_adds", "zoh_sparse",
+           "zoh_stack"]

@@ -287,6 +287,117 @@ def change_statistics(lik: ChangeLikelihoods, window_steps: int | None = None,
     return ChangeStatistics(log_shiryaev_roberts=log_sr, glr=glr, window_steps=window_steps)
 
 
+@dataclass(frozen=True)
+class WindowedChangeStatistics:
+    """The on-line statistics of one change at any step within a window, from
+    :func:`windowed_change_statistics`.
+
+    Attributes
+    ----------
+    log_shiryaev_roberts : ndarray, (K,)
+        log R_k (natural log; −inf before the first change step).
+    glr : ndarray, (K,)
+        g_k, the largest log-likelihood ratio in the window (−inf before the first change step).
+    glr_value : ndarray of int, (K,)
+        The candidate value v of g_k's maximum (−1 before the first change step): which
+        parameter and how far, the diagnosis that comes with an alarm.
+    glr_change_step : ndarray of int, (K,)
+        The change step τ (1-based) of g_k's maximum (−1 before the first change step).
+    window_steps : int
+        W.
+    filter_steps : int
+        Kalman filter steps run (the cost): (1 + V W) (K − τ₀ + 1) + τ₀ − 1.
+    """
+
+    log_shiryaev_roberts: np.ndarray
+    glr: np.ndarray
+    glr_value: np.ndarray
+    glr_change_step: np.ndarray
+    window_steps: int
+    filter_steps: int
+
+
+def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatch],
+                               y: np.ndarray, theta_before, thetas_after, window_steps: int,
+                               x0, P0, u: np.ndarray | None = None, first_change_step: int = 2,
+                               prior: np.ndarray | None = None) -> WindowedChangeStatistics:
+    """The window-limited mixture Shiryaev–Roberts statistic and GLR of one change from θ₀ to
+    one of V candidate values at **any** step, with exact Kalman likelihood ratios.
+
+    The statistics of :func:`change_statistics` with every step from ``first_change_step`` on
+    a possible change time (weight one each) and the window W = ``window_steps``::
+
+        R_k = Σ_{τ = max(k−W+1, τ₀)..k} Σ_v π_v Π_{i=τ..k} Λ_i(v, τ)
+        g_k = max_{τ, v} Σ_{i=τ..k} log Λ_i(v, τ)
+
+    where Λ_i(v, τ) is the ratio of the predictive densities of y_i under the Kalman filter
+    started at τ − 1 from the no-change filter's state (the same x and P) with the matrices of
+    θ_v, and under the no-change filter.  A hypothesis' filter lives only while its change
+    lies in the window, so one bank of 1 + V W filters runs the whole record (a ring: the V
+    filters of the change W steps back are restarted from the no-change filter's state at
+    every step) — the same numbers as :func:`change_likelihoods` over every step followed by
+    :func:`change_statistics` with the window, at V W (K − τ₀) filter steps instead of about
+    V K² / 2.  ``prior`` (V,) weighs the values (uniform by default, normalised to 1).
+    """
+    y = np.atleast_2d(np.asarray(y, float))
+    K = y.shape[0]
+    W = int(window_steps)
+    if W < 1:
+        raise ValueError(f"window_steps must be >= 1, got {window_steps}")
+    if not 2 <= first_change_step <= K:
+        raise ValueError(f"first_change_step must be in 2..{K}, got {first_change_step}")
+    before = np.atleast_2d(np.asarray(theta_before, float))
+    after = np.atleast_2d(np.asarray(thetas_after, float))
+    V = after.shape[0]
+    w = np.full(V, 1.0 / V) if prior is None else np.asarray(prior, float)
+    if w.shape != (V,) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"prior must be non-negative weights of shape {(V,)}")
+    with np.errstate(divide="ignore"):
+        log_w = np.log(w / w.sum())
+    U = None if u is None else np.asarray(u, float).reshape(K, -1)
+    nominal, post = system(before), system(after)
+    bank = concat_systems([nominal] + [post] * W, [1] + [V] * W)     # 0: no change; 1 + r V + v
+    n = np.asarray(x0).shape[-1]
+    x = np.asarray(x0, float).reshape(1, n)
+    P = np.asarray(P0, float).reshape(1, n, n)
+    head = first_change_step - 1                 # steps 1..τ₀−1 under θ₀ only
+    steps_run = head
+    if head:
+        x, P, _ = kalman_run(x, P, nominal, y[:head], None if U is None else U[:head])
+    x = np.repeat(x, 1 + V * W, axis=0)           # every slot starts as the no-change filter
+    P = np.repeat(P, 1 + V * W, axis=0)
+    log_ratio = np.zeros((W, V))                  # Σ_{i=τ..k} log Λ_i of ring slot r
+    started = np.zeros(W, bool)
+    log_sr = np.full(K, -np.inf)
+    glr = np.full(K, -np.inf)
+    glr_value = np.full(K, -1, dtype=np.int64)
+    glr_step = np.full(K, -1, dtype=np.int64)
+    slot_step = np.zeros(W, dtype=np.int64)       # the change step τ each slot holds
+    ancestors = np.arange(1 + V * W)
+    for k in range(first_change_step, K + 1):    # step k (1-based), row k − 1
+        r = k % W                                 # the slot of τ = k: the change W steps back
+        ancestors[1 + r * V:1 + (r + 1) * V] = 0  # … restarted from the no-change filter
+        x, P, ll = kalman_run(x, P, bank, y[k - 1:k], None if U is None else U[k - 1:k],
+                              ancestors=ancestors)
+        ancestors[1 + r * V:1 + (r + 1) * V] = np.arange(1 + r * V, 1 + (r + 1) * V)
+        steps_run += 1 + V * W
+        log_ratio[r] = 0.0
+        started[r] = True
+        slot_step[r] = k
+        log_ratio += (ll[1:, 0] - ll[0, 0]).reshape(W, V)            # log Λ_k(v, τ)
+        live = np.where(started[:, None], log_w[None, :] + log_ratio, -np.inf)
+        top = live.max()
+        log_sr[k - 1] = top + np.log(np.exp(live - top).sum())
+        ratios = np.where(started[:, None], log_ratio, -np.inf)
+        best = int(np.argmax(ratios))
+        glr[k - 1] = ratios.flat[best]
+        glr_value[k - 1] = best % V
+        glr_step[k - 1] = slot_step[best // V]
+    return WindowedChangeStatistics(log_shiryaev_roberts=log_sr, glr=glr, glr_value=glr_value,
+                                    glr_change_step=glr_step, window_steps=W,
+                                    filter_steps=steps_run)
+
+
 def _logsumexp(a: np.ndarray) -> np.ndarray:
     """log Σ_i exp(a[i, k]) over the first axis (−inf where every term is −inf)."""
     top = np.max(a, axis=0)

@@ -173,3 +173,48 @@ def test_statistics_rise_after_a_real_change_of_an_ar1():
     assert stats.log_shiryaev_roberts[after].min() - stats.log_shiryaev_roberts[before].max() > 5
     # 60 steps after the change it has left the 30-step window; the full statistic keeps it
     assert stats.glr[-1] < change_statistics(lik).glr[-1]
+
+
+def _two_state_system(theta):
+    """A two-state model whose transition's first row is θ (a, b), with an input: enough
+    structure for the bank's ring of restarted filters to be tested against the full bank."""
+    from railpaper.engine.linear_gaussian import LinearGaussianBatch
+    th = np.atleast_2d(theta)
+    F = np.zeros((len(th), 2, 2))
+    F[:, 0, 0], F[:, 0, 1], F[:, 1, 1] = th[:, 0], th[:, 1], 0.5
+    return LinearGaussianBatch(F, 0.3 * np.eye(2), [[1.0, 0.2]], [[0.1]],
+                               np.ones((len(th), 2, 1)))
+
+
+@pytest.mark.parametrize("window,first", [(1, 2), (4, 2), (7, 10), (60, 10)])
+def test_windowed_bank_equals_the_full_bank_with_its_window(window, first):
+    """windowed_change_statistics (V W filters in a ring, restarted from the no-change filter)
+    against change_likelihoods over every step from ``first`` on followed by
+    change_statistics with the same window and prior: the same log R_k and g_k (1e-10 nats);
+    the GLR's argmax (value and change step) is the brute-force one; −inf before ``first``."""
+    from railpaper.engine import change_likelihoods, change_statistics, windowed_change_statistics
+    rng = np.random.default_rng(3)
+    K = 60
+    y, u = rng.standard_normal((K, 1)), rng.standard_normal((K, 1))
+    after = np.array([[0.5, 0.1], [-0.3, 0.4], [0.9, -0.2]])
+    prior = np.array([0.5, 0.3, 0.2])
+    bank = windowed_change_statistics(_two_state_system, y, [0.8, 0.0], after, window,
+                                      np.zeros(2), np.eye(2), u=u, first_change_step=first,
+                                      prior=prior)
+    lik = change_likelihoods(_two_state_system, y, [0.8, 0.0], after, np.arange(first, K + 1),
+                             np.zeros(2), np.eye(2), u=u)
+    full = change_statistics(lik, window, prior)
+    rows = slice(first - 1, K)
+    np.testing.assert_allclose(bank.log_shiryaev_roberts[rows], full.log_shiryaev_roberts[rows],
+                               rtol=0, atol=1e-10)
+    np.testing.assert_allclose(bank.glr[rows], full.glr[rows], rtol=0, atol=1e-10)
+    assert np.all(np.isneginf(bank.glr[:first - 1])) and np.all(bank.glr_value[:first - 1] == -1)
+    for k in (first, K // 2 + 3, K):                     # the maximum's (v, τ) by enumeration
+        ratio = lik.changed[:, :, k - 1] - lik.no_change[k - 1]
+        live = (lik.tau_steps <= k) & (lik.tau_steps > k - window)
+        v, j = np.unravel_index(np.argmax(np.where(live[None], ratio, -np.inf)), ratio.shape)
+        assert (bank.glr_value[k - 1], bank.glr_change_step[k - 1]) == (v, lik.tau_steps[j])
+    assert bank.filter_steps == (1 + 3 * window) * (K - first + 1) + first - 1
+    with pytest.raises(ValueError, match="window_steps"):
+        windowed_change_statistics(_two_state_system, y, [0.8, 0.0], after, 0, np.zeros(2),
+                                   np.eye(2))
