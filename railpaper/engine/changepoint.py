@@ -49,7 +49,7 @@ from typing import Callable
 
 import numpy as np
 
-from railpaper.engine.kalman_bank import kalman_run
+from railpaper.engine.kalman_bank import kalman_run, kalman_run_restarting
 from railpaper.engine.linear_gaussian import LinearGaussianBatch, concat_systems
 
 
@@ -88,6 +88,9 @@ class ChangePosterior:
     ----------
     p_changed : ndarray, (K,)
         P(τ ≤ k | y_1..k) after every step k (row k−1): the alarm statistic.
+    log_odds_changed : ndarray, (K,)
+        log P(τ ≤ k | y_1..k) − log P(τ > k | y_1..k), natural log, computed from the
+        log-likelihoods (finite where ``p_changed`` rounds to 1).
     tau_posterior : ndarray, (J,)
         P(τ = τ_j | y_1..K, a change happened) after the last step.
     value_posterior : ndarray, (V,)
@@ -103,6 +106,7 @@ class ChangePosterior:
     value_posterior: np.ndarray
     p_changed_final: float
     tau_steps: np.ndarray
+    log_odds_changed: np.ndarray | None = None
 
 
 def change_likelihoods(system: Callable[[np.ndarray], LinearGaussianBatch], y: np.ndarray,
@@ -224,7 +228,8 @@ def change_posterior(lik: ChangeLikelihoods, p_no_change: float = 0.5,
     tau_post, value_post = joint.sum(axis=0) / z, joint.sum(axis=1) / z
     return ChangePosterior(p_changed=p_changed, tau_posterior=tau_post,
                            value_posterior=value_post, p_changed_final=float(p_changed[-1]),
-                           tau_steps=lik.tau_steps.copy())
+                           tau_steps=lik.tau_steps.copy(),
+                           log_odds_changed=log_changed - log_rest)
 
 
 @dataclass(frozen=True)
@@ -306,7 +311,7 @@ class WindowedChangeStatistics:
     window_steps : int
         W.
     filter_steps : int
-        Kalman filter steps run (the cost): (1 + V W) (K − τ₀ + 1) + τ₀ − 1.
+        Kalman filter steps run (the cost): V W (K − τ₀ + 1) + K.
     """
 
     log_shiryaev_roberts: np.ndarray
@@ -333,9 +338,10 @@ def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatc
     where Λ_i(v, τ) is the ratio of the predictive densities of y_i under the Kalman filter
     started at τ − 1 from the no-change filter's state (the same x and P) with the matrices of
     θ_v, and under the no-change filter.  A hypothesis' filter lives only while its change
-    lies in the window, so one bank of 1 + V W filters runs the whole record (a ring: the V
+    lies in the window, so one bank of V W filters runs the whole record (a ring: the V
     filters of the change W steps back are restarted from the no-change filter's state at
-    every step) — the same numbers as :func:`change_likelihoods` over every step followed by
+    every step, :func:`~railpaper.engine.kalman_bank.kalman_run_restarting`) — the same
+    numbers as :func:`change_likelihoods` over every step followed by
     :func:`change_statistics` with the window, at V W (K − τ₀) filter steps instead of about
     V K² / 2.  ``prior`` (V,) weighs the values (uniform by default, normalised to 1).
     """
@@ -356,43 +362,45 @@ def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatc
         log_w = np.log(w / w.sum())
     U = None if u is None else np.asarray(u, float).reshape(K, -1)
     nominal, post = system(before), system(after)
-    bank = concat_systems([nominal] + [post] * W, [1] + [V] * W)     # 0: no change; 1 + r V + v
     n = np.asarray(x0).shape[-1]
-    x = np.asarray(x0, float).reshape(1, n)
-    P = np.asarray(P0, float).reshape(1, n, n)
-    head = first_change_step - 1                 # steps 1..τ₀−1 under θ₀ only
-    steps_run = head
-    if head:
-        x, P, _ = kalman_run(x, P, nominal, y[:head], None if U is None else U[:head])
-    x = np.repeat(x, 1 + V * W, axis=0)           # every slot starts as the no-change filter
-    P = np.repeat(P, 1 + V * W, axis=0)
-    log_ratio = np.zeros((W, V))                  # Σ_{i=τ..k} log Λ_i of ring slot r
-    started = np.zeros(W, bool)
+    # the no-change filter, its state after every step kept: x_post[k] after step k
+    x_post, P_post = np.empty((K + 1, n)), np.empty((K + 1, n, n))
+    x_post[0], P_post[0] = np.asarray(x0, float).reshape(n), np.asarray(P0, float)
+    ll0 = np.empty(K)
+    for k in range(1, K + 1):
+        x, P, ll = kalman_run(x_post[k - 1][None], P_post[k - 1][None], nominal, y[k - 1:k],
+                              None if U is None else U[k - 1:k])
+        x_post[k], P_post[k], ll0[k - 1] = x[0], P[0], ll[0, 0]
+    # lane r V + v holds the changes τ ≡ r (mod W) to θ_v, restarted at each one from the
+    # no-change filter's state after step τ − 1; local row t is step k = τ₀ + t
+    t0 = first_change_step - 1
+    rows = K - t0
+    slot = np.repeat(np.arange(W), V)                         # r of each lane
+    phase = (slot - first_change_step) % W                    # rows t with (τ₀ + t) % W == r
+    lanes = kalman_run_restarting(x_post[t0:K], P_post[t0:K], concat_systems([post] * W, [V] * W),
+                                  y[t0:], None if U is None else U[t0:], phase, W)
+    steps_run = K + V * W * rows
+    # Σ_{i=τ..k} log Λ_i of each lane's current change τ: a cumulative sum since its restart
+    total = np.cumsum(lanes - ll0[t0:][None, :], axis=1)       # (V W, rows)
+    t = np.arange(rows)
+    last = t[None, :] - (t[None, :] - phase[:, None]) % W      # row of the current restart
+    before_restart = np.where(last > 0, np.take_along_axis(total, np.maximum(last - 1, 0),
+                                                           axis=1), 0.0)
+    live = last >= 0                                          # the lane has started
+    log_ratio = np.where(live, total - before_restart, -np.inf)
+    v_of_lane = np.tile(np.arange(V), W)
+    weighted = log_ratio + log_w[v_of_lane][:, None]
+    top = weighted.max(axis=0)
+    safe = np.where(np.isfinite(top), top, 0.0)
     log_sr = np.full(K, -np.inf)
     glr = np.full(K, -np.inf)
     glr_value = np.full(K, -1, dtype=np.int64)
     glr_step = np.full(K, -1, dtype=np.int64)
-    slot_step = np.zeros(W, dtype=np.int64)       # the change step τ each slot holds
-    ancestors = np.arange(1 + V * W)
-    for k in range(first_change_step, K + 1):    # step k (1-based), row k − 1
-        r = k % W                                 # the slot of τ = k: the change W steps back
-        ancestors[1 + r * V:1 + (r + 1) * V] = 0  # … restarted from the no-change filter
-        x, P, ll = kalman_run(x, P, bank, y[k - 1:k], None if U is None else U[k - 1:k],
-                              ancestors=ancestors)
-        ancestors[1 + r * V:1 + (r + 1) * V] = np.arange(1 + r * V, 1 + (r + 1) * V)
-        steps_run += 1 + V * W
-        log_ratio[r] = 0.0
-        started[r] = True
-        slot_step[r] = k
-        log_ratio += (ll[1:, 0] - ll[0, 0]).reshape(W, V)            # log Λ_k(v, τ)
-        live = np.where(started[:, None], log_w[None, :] + log_ratio, -np.inf)
-        top = live.max()
-        log_sr[k - 1] = top + np.log(np.exp(live - top).sum())
-        ratios = np.where(started[:, None], log_ratio, -np.inf)
-        best = int(np.argmax(ratios))
-        glr[k - 1] = ratios.flat[best]
-        glr_value[k - 1] = best % V
-        glr_step[k - 1] = slot_step[best // V]
+    log_sr[t0:] = safe + np.log(np.exp(weighted - safe).sum(axis=0))
+    best = np.argmax(log_ratio, axis=0)
+    glr[t0:] = log_ratio[best, t]
+    glr_value[t0:] = v_of_lane[best]
+    glr_step[t0:] = last[best, t] + first_change_step
     return WindowedChangeStatistics(log_shiryaev_roberts=log_sr, glr=glr, glr_value=glr_value,
                                     glr_change_step=glr_step, window_steps=W,
                                     filter_steps=steps_run)

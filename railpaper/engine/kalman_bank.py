@@ -328,6 +328,44 @@ def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, l
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
+def _kf_run_restarting(x_start, P_start, phase, period, F, Q, B, U, H, hcols, hcount, R, Y,
+                       loglik, block):  # pragma: no cover - compiled
+    """:func:`_kf_run` over the rows of Y, except that filter i is restarted from
+    ``x_start[t]``, ``P_start[t]`` before row t wherever ``t % period == phase[i]`` (every
+    filter starts from row 0's); only the log-likelihoods are kept."""
+    N = loglik.shape[0]
+    n = x_start.shape[1]
+    p = H.shape[1]
+    n_steps = Y.shape[0]
+    sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
+    sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
+    n_blocks = (N + block - 1) // block
+    for b in numba.prange(n_blocks):
+        lo = b * block
+        nb = min(block, N - lo)
+        Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
+        xl = np.empty((n, nb))
+        own = np.arange(lo, lo + nb)
+        _gather_matrix(F, own, sF, Fl)
+        _gather_matrix(H, own, sH, Hl)
+        xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
+        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
+        for t in range(n_steps):                  # the block stays in cache over the steps
+            for q in range(nb):
+                if t == 0 or t % period == phase[lo + q]:
+                    for i in range(n):
+                        xl[i, q] = x_start[t, i]
+                        for j in range(n):
+                            Pl[i, j, q] = P_start[t, i, j]
+            _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
+            _innovation_block(Hl, hcols, hcount, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc,
+                              z, W, logdet, bad, ll)                          # z, W, log N
+            _posterior_block(xp, W, z, xl, Pl)                                # x, P
+            for q in range(nb):
+                loglik[lo + q, t] = ll[q]
+
+
+@numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_predict(x, P, F, Q, B, u, H, hcols, hcount, R, y, ancestors, rows, x_blocks, P_blocks,
                 loglik, block):  # pragma: no cover - compiled
     """Time update and predictive log-likelihood of every filter, no measurement update: the
@@ -513,6 +551,54 @@ def kalman_run(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, Y: np.
     if record:
         return x_out, P_out, loglik, x_hist, var_hist
     return x_out, P_out, loglik
+
+
+def kalman_run_restarting(x_start: np.ndarray, P_start: np.ndarray, system: LinearGaussianBatch,
+                          Y: np.ndarray, U: np.ndarray | None, phase: np.ndarray,
+                          period: int) -> np.ndarray:
+    """Log-likelihoods (N, K) of N Kalman filters over the K rows of Y, filter i restarted from
+    ``x_start[t]``, ``P_start[t]`` before every row t with ``t % period == phase[i]`` (and
+    before row 0): filters that each live ``period`` rows from a state given per row, run as
+    one bank that stays in cache over the rows instead of K calls of :func:`kalman_step` — a
+    windowed change detector's ring of hypotheses
+    (:func:`railpaper.engine.changepoint.windowed_change_statistics`).  Step by step the
+    arithmetic is that of :func:`kalman_run`.
+
+    Parameters
+    ----------
+    x_start, P_start : ndarray, (K, n), (K, n, n)
+        The state a filter restarted before row t starts from.
+    system : LinearGaussianBatch
+        The filters' matrices (per filter or shared).
+    Y : ndarray, (K, p);  U : ndarray, (K, m), optional
+    phase : ndarray of int, (N,)
+        Each filter's restart phase, in 0..period−1.
+    period : int
+        Rows between a filter's restarts.
+    """
+    Y = kernel_array(np.atleast_2d(np.asarray(Y, float)))
+    K = Y.shape[0]
+    phase = kernel_array(phase, np.int64)
+    N = phase.shape[0]
+    x_start = kernel_array(np.asarray(x_start, float))
+    n = x_start.shape[1]
+    if x_start.shape != (K, n) or np.shape(P_start) != (K, n, n):
+        raise ValueError(f"kalman_run_restarting: x_start and P_start need one state per row "
+                         f"({K}), got {x_start.shape} and {np.shape(P_start)}")
+    if period < 1 or (N and not 0 <= phase.min() <= phase.max() < period):
+        raise ValueError("kalman_run_restarting: phases must lie in 0..period-1")
+    p = system.H.shape[-2]
+    B = system.B
+    if B is None or U is None:
+        B, U = None, np.zeros((K, 1))
+    U = kernel_array(np.asarray(U, float).reshape(K, -1))
+    loglik = np.empty((N, K))
+    H = _stack(system.H, (p, n))
+    _kf_run_restarting(x_start, kernel_array(np.asarray(P_start, float)), phase, int(period),
+                       _stack(system.F, (n, n)), _stack(system.Q, (n, n)), _stack(B, (n, 1)), U,
+                       H, *measurement_pattern(H), _stack(system.R, (p, p)), Y, loglik,
+                       block_size(N))
+    return loglik
 
 
 def kalman_step(x: np.ndarray, P: np.ndarray, system: LinearGaussianBatch, y: np.ndarray,

@@ -214,7 +214,7 @@ def test_windowed_bank_equals_the_full_bank_with_its_window(window, first):
         live = (lik.tau_steps <= k) & (lik.tau_steps > k - window)
         v, j = np.unravel_index(np.argmax(np.where(live[None], ratio, -np.inf)), ratio.shape)
         assert (bank.glr_value[k - 1], bank.glr_change_step[k - 1]) == (v, lik.tau_steps[j])
-    assert bank.filter_steps == (1 + 3 * window) * (K - first + 1) + first - 1
+    assert bank.filter_steps == 3 * window * (K - first + 1) + K
     with pytest.raises(ValueError, match="window_steps"):
         windowed_change_statistics(_two_state_system, y, [0.8, 0.0], after, 0, np.zeros(2),
                                    np.eye(2))
