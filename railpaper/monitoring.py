@@ -13,6 +13,13 @@ of both, independent of any detector:
   says "at least 3.3 h", not "infinite");
 * :func:`cusum_average_run_length` — Brook & Evans (1972): the CUSUM's average run length from
   a Markov chain on a grid of its state, for Gaussian increments;
+* :func:`block_maxima` and :func:`fit_exponential_tail` — a threshold for a mean time between
+  false alarms far beyond the running measured: the largest statistic in each block of
+  fault-free running, an exponential tail fitted to the largest of them (the Gumbel domain of
+  a log-likelihood ratio), and :class:`ExponentialTail`'s mean time at a threshold and
+  threshold at a mean time; :func:`shiryaev_roberts_mtbfa_lower_h` — the bound E[T] ≥ A of a
+  Shiryaev–Roberts detector with threshold A (Pollak 1987), for a detector whose likelihood
+  ratios are exact;
 * :func:`kaplan_meier` and :func:`kaplan_meier_median` — detection delays are censored (a record
   ends, or reaches flange contact, before the alarm): the Kaplan–Meier survival curve, its median
   with the Brookmeyer–Crowley interval (Greenwood's variance, log–log transformed), and
@@ -112,6 +119,84 @@ def cusum_average_run_length(mean: float, threshold: float, sd: float = 1.0,
     return float(arl[0])
 
 
+def block_maxima(statistic: Sequence[float], first_row: int, block_rows: int) -> np.ndarray:
+    """The largest value in each complete block of ``block_rows`` samples from ``first_row`` on
+    (a trailing partial block is dropped, so the running time is blocks × block length)."""
+    if block_rows < 1 or first_row < 0:
+        raise ValueError("need block_rows >= 1 and first_row >= 0")
+    x = np.asarray(statistic, float)[first_row:]
+    blocks = x.size // block_rows
+    return x[:blocks * block_rows].reshape(blocks, block_rows).max(axis=1)
+
+
+@dataclass(frozen=True)
+class ExponentialTail:
+    """P(a block's maximum > h) = ``exceed`` · exp(−(h − ``level``) / ``scale``) for h ≥ level:
+    the tail of the block maxima of a fault-free statistic (one alarm per exceeding block, so a
+    detector restarted after an alarm is not counted twice in one block).
+
+    Attributes
+    ----------
+    level : float
+        The (k+1)-th largest block maximum: the tail starts there.
+    scale : float
+        Mean excess over ``level`` of the k largest (the exponential's maximum-likelihood scale).
+    exceed : float
+        k / blocks.
+    blocks : int
+    block_s : float
+        Length of a block, s.
+    """
+
+    level: float
+    scale: float
+    exceed: float
+    blocks: int
+    block_s: float
+
+    def mtbfa_h(self, threshold: float) -> float:
+        """Mean time between false alarms at ``threshold`` (≥ ``level``), hours."""
+        if threshold < self.level:
+            raise ValueError(f"threshold {threshold:g} lies below the tail ({self.level:g})")
+        p = self.exceed * math.exp(-(threshold - self.level) / self.scale)
+        return self.block_s / p / SECONDS_PER_HOUR
+
+    def threshold(self, mtbfa_h: float) -> float:
+        """The threshold whose mean time between false alarms is ``mtbfa_h`` hours (at least
+        the one at ``level``, :meth:`mtbfa_h` of ``level``)."""
+        if mtbfa_h < self.mtbfa_h(self.level):
+            raise ValueError(f"{mtbfa_h:g} h lies below the tail's range "
+                             f"({self.mtbfa_h(self.level):g} h)")
+        return self.level + self.scale * math.log(self.exceed * mtbfa_h * SECONDS_PER_HOUR
+                                                  / self.block_s)
+
+
+def fit_exponential_tail(maxima: Sequence[float], block_s: float, tail_fraction: float = 0.2
+                         ) -> ExponentialTail:
+    """:class:`ExponentialTail` of block maxima: the k = max(2, ⌈tail_fraction · n⌉) largest
+    are the tail, above the (k+1)-th largest; their mean excess is the scale."""
+    m = np.sort(np.asarray(maxima, float))[::-1]
+    m = m[np.isfinite(m)]
+    k = max(2, math.ceil(tail_fraction * m.size))
+    if m.size < k + 1:
+        raise ValueError(f"an exponential tail needs at least {k + 1} finite block maxima, "
+                         f"got {m.size}")
+    level = float(m[k])
+    scale = float(np.mean(m[:k] - level))
+    if not scale > 0:
+        raise ValueError("the block maxima's tail has no spread (all equal)")
+    return ExponentialTail(level, scale, k / m.size, int(m.size), float(block_s))
+
+
+def shiryaev_roberts_mtbfa_lower_h(log_threshold: float, dt_s: float) -> float:
+    """Lower bound on the mean time between false alarms of a Shiryaev–Roberts detector that
+    alarms when log R_k ≥ ``log_threshold``: E∞[T] ≥ A = e^log_threshold samples (Pollak 1987;
+    R_k − k is a zero-mean martingale under no change when every likelihood ratio is exact),
+    in hours at ``dt_s`` per sample.  A window only lowers R_k, so it holds for the windowed
+    statistic too."""
+    return math.exp(log_threshold) * dt_s / SECONDS_PER_HOUR
+
+
 @dataclass(frozen=True)
 class SurvivalCurve:
     """Kaplan–Meier estimate: at each distinct event time, the survival S(t) just after it and
@@ -189,6 +274,8 @@ def detected_within(times: Sequence[float], observed: Sequence[bool], horizon_s:
     return float(1.0 - (curve.survival[before][-1] if before.any() else 1.0))
 
 
-__all__ = ["FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve", "cusum_alarms",
-           "cusum_average_run_length", "detected_within", "kaplan_meier", "kaplan_meier_median",
-           "mean_time_between_false_alarms_h", "restarted_cusum_alarms"]
+__all__ = ["ExponentialTail", "FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve",
+           "block_maxima", "cusum_alarms", "cusum_average_run_length", "detected_within",
+           "fit_exponential_tail", "kaplan_meier", "kaplan_meier_median",
+           "mean_time_between_false_alarms_h", "restarted_cusum_alarms",
+           "shiryaev_roberts_mtbfa_lower_h"]
