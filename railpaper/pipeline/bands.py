@@ -22,7 +22,7 @@ from pathlib import Path
 from railpaper.data import read_toml
 from railpaper.pipeline.chapters import chapter_spec, run_chapter
 from railpaper.pipeline.claim_rules import condition_thresholds, rule_metrics
-from railpaper.pipeline.findings import read_findings
+from railpaper.pipeline.findings import in_force
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 
 DEFAULT_STRIDE = 1000
@@ -41,7 +41,7 @@ def rule_thresholds(chapter: str) -> dict[str, list[float]]:
     chapter of our own: each finding's threshold, for both ends of its interval)."""
     out: dict[str, list[float]] = {}
     if not chapter_spec(chapter).paper:
-        for row in read_findings(chapter).values():
+        for row in in_force(chapter).values():
             for metric in row["interval"]:
                 out.setdefault(metric, []).append(float(row["threshold"]))
         return out

@@ -28,7 +28,7 @@ from railpaper.pipeline.chapters import chapter_spec, default_output_dir
 from railpaper.pipeline.claim_rules import rule_metrics
 from railpaper.pipeline.decisive import check_provenance
 from railpaper.pipeline.declarations import check_registry, load_declarations, load_registry
-from railpaper.pipeline.findings import read_findings
+from railpaper.pipeline.findings import in_force
 from railpaper.pipeline.outputs import chapter_data_dir, claims
 from railpaper.rulebook import Vocabulary
 
@@ -64,7 +64,7 @@ def load_tolerances(chapter: str) -> dict:
 def _claims_by_metric(chapter: str) -> dict[str, str]:
     out = {}
     if not chapter_spec(chapter).paper:                  # a chapter of our own: its findings
-        for key, row in read_findings(chapter).items():
+        for key, row in in_force(chapter).items():
             for metric in [row["metric"], *row["interval"]]:
                 out.setdefault(metric, f"finding '{key}'")
         return out

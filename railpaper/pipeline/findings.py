@@ -15,22 +15,31 @@ same way, on a statistic's 95 % interval over records against a threshold the st
     min_samples = 60          # optional: fewer records than this give "undecided" (the size at
                               # which disjoint seed batches agree on the verdict)
     note = "..."              # optional: what changed after the evidence was seen, and when
+    operating_point_mtbfa_h = 100   # optional: the mean time between false alarms (h) whose
+                              # thresholds the statistic is read at (its metrics end in _at_100h)
+    retired = "..."           # optional: when and why the finding was withdrawn (it is then
+                              # shown with its last verdict, not judged)
+    last_verdict = "..."      # with retired: its verdict in the last default run before
 
 Verdicts: **holds** (the whole interval on the stated side), **fails** (the whole interval on
 the other side), **undecided** (the interval straddles the threshold, or fewer records than
-``min_samples``).  A band test
+``min_samples``).  The page shows the findings in force in a table and, in a collapsed section
+below it, every note and every retired finding with its last verdict.  A band test
 (tests/pipeline/test_findings.py) checks that every run passing CI gives the same verdict:
 the CI bands of the interval's ends sit on one side of the threshold.
 """
 
 from __future__ import annotations
 
+import re
+
 from railpaper.data import DataError, read_toml
 from railpaper.pipeline.outputs import chapter_data_dir
 
 FINDING_KEYS = {"finding", "metric", "interval", "n_samples", "threshold", "side", "unit",
-                "min_samples", "note"}
-OPTIONAL_KEYS = {"unit", "min_samples", "note"}
+                "min_samples", "note", "retired", "last_verdict", "operating_point_mtbfa_h"}
+OPTIONAL_KEYS = {"unit", "min_samples", "note", "retired", "last_verdict",
+                 "operating_point_mtbfa_h"}
 SIDES = ("above", "below")
 FINDING_VERDICTS = ("holds", "fails", "undecided")
 
@@ -49,7 +58,21 @@ def read_findings(chapter: str) -> dict[str, dict]:
         if row["side"] not in SIDES or len(row["interval"]) != 2:
             raise DataError(f"{path}: finding '{key}': side must be 'above' or 'below' and "
                             "interval two metric names")
+        if "operating_point_mtbfa_h" in row:
+            point = f"_at_{float(row['operating_point_mtbfa_h']):g}h"
+            names = [row["metric"], row["n_samples"], *row["interval"]]
+            if not all(re.search(re.escape(point) + "(_|$)", name) for name in names):
+                raise DataError(f"{path}: finding '{key}': its metrics must be read at its "
+                                f"operating point ('{point}' in every name)")
+        if ("retired" in row) != (row.get("last_verdict") in FINDING_VERDICTS):
+            raise DataError(f"{path}: finding '{key}': a retired finding needs 'retired' (when "
+                            f"and why) and 'last_verdict' (one of {', '.join(FINDING_VERDICTS)})")
     return rows
+
+
+def in_force(chapter: str) -> dict[str, dict]:
+    """The chapter's findings that are not retired."""
+    return {k: row for k, row in read_findings(chapter).items() if "retired" not in row}
 
 
 def verdict(row: dict, low: float, high: float, n: float | None = None) -> str:
@@ -91,9 +114,9 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set
 
 
 def judged(chapter: str, metrics: dict) -> list[dict]:
-    """Each finding with this run's statistic, interval, sample size and verdict."""
+    """Each finding in force with this run's statistic, interval, sample size and verdict."""
     out = []
-    for key, row in read_findings(chapter).items():
+    for key, row in in_force(chapter).items():
         low, high = (metrics[m] for m in row["interval"])
         n = metrics[row["n_samples"]]
         out.append(dict(row, key=key, value=metrics[row["metric"]], low=low, high=high, n=n,
@@ -102,7 +125,8 @@ def judged(chapter: str, metrics: dict) -> list[dict]:
 
 
 def findings_markdown(chapter: str, metrics: dict) -> str:
-    """The findings table of a chapter page (MyST markdown)."""
+    """The findings table of a chapter page (MyST markdown), then a collapsed section with the
+    notes of what changed after the evidence was seen and the retired findings."""
     lines = ["| finding | threshold | ours (95 % interval, records) | verdict |",
              "|---|---|---|---|"]
     for f in judged(chapter, metrics):
@@ -110,12 +134,22 @@ def findings_markdown(chapter: str, metrics: dict) -> str:
         word = "more than" if f["side"] == "above" else "less than"
         needs = (f" (needs {f['min_samples']:g} records to be decided)"
                  if f["n"] < f.get("min_samples", 0) else "")
-        note = f" *{f['note']}*" if f.get("note") else ""
-        lines.append(f"| {f['finding']}{note} | {word} {f['threshold']:g}{unit} | "
+        lines.append(f"| {f['finding']} | {word} {f['threshold']:g}{unit} | "
                      f"{f['value']:.3g} [{f['low']:.3g}, {f['high']:.3g}], n = {f['n']:g} | "
                      f"**{f['verdict']}**{needs} |")
+    history = []
+    for key, row in read_findings(chapter).items():
+        if "retired" in row:
+            history.append(f"* **{key}** (retired; last verdict **{row['last_verdict']}**): "
+                           f"{row['finding']}. *{row['retired']}*"
+                           + (f" {row['note']}" if row.get("note") else ""))
+        elif row.get("note"):
+            history.append(f"* **{key}**: {row['note']}")
+    if history:
+        lines += ["", "````{dropdown} Revisions: what changed after the evidence was seen, and "
+                  "retired findings", ""] + history + ["````"]
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["FINDING_VERDICTS", "findings_markdown", "judged", "read_findings", "verdict",
-           "verdicts_over_bands"]
+__all__ = ["FINDING_VERDICTS", "findings_markdown", "in_force", "judged", "read_findings",
+           "verdict", "verdicts_over_bands"]
