@@ -1,19 +1,24 @@
-"""The four detectors of the appendix, each a statistic after every sample of one record
+"""The five detectors of the appendix, each a statistic after every sample of one record
 (alarms, thresholds and delays are those of
 :mod:`~railpaper.experiments.suspension_fault_detection.evidence`).
 
-* :func:`residual_cusum` — the classical residual test: the nominal model's Kalman filter, its
-  whitened innovations and Page's CUSUM against a growth of their variance
+* :func:`residual_cusum` (``cusum``) — the classical residual test: the nominal model's Kalman
+  filter, its whitened innovations and Page's CUSUM against a growth of their variance
   (:mod:`railpaper.engine.residual_alarms`; Basseville & Nikiforov 1993);
-* :func:`windowed_chi2` — the same innovations' squared norm summed over a sliding window (a
-  χ² test: it also sees a change of their mean or direction, which a variance CUSUM misses);
-* :func:`rbpf_departure` — paper 003's RBPF (Liu–West artificial evolution at every step, the
-  paper's scheme) over the two parameters a fault may change, K_sy and C_saly; the statistic is
-  the larger relative departure of their estimates from nominal;
-* :func:`exact_change_posterior` — the exact reference: for every hypothesis (which fault, when)
-  on the prior's grid, a Kalman filter gives the likelihood exactly
-  (:mod:`railpaper.engine.changepoint`); the statistic is the posterior probability that a
-  fault has happened by now.
+* :func:`windowed_chi2` (``chi2``) — the same innovations' squared norm summed over a sliding
+  window (a χ² test: it also sees a change of their mean or direction, which a variance CUSUM
+  misses);
+* :func:`change_bank` (``glr`` and ``bayes``) — detectors that do not know the fault: any of
+  the model's five parameters times any factor of ``[bayes] factors`` in the data file, from any
+  sample on, with the exact Kalman likelihood ratio of each hypothesis against no change
+  (:func:`railpaper.engine.windowed_change_statistics`); ``glr`` is the largest log-ratio over
+  the hypotheses whose change lies in the window (Willsky & Jones 1976; Lai 1998), ``bayes``
+  the log of the mixture Shiryaev–Roberts statistic (the sum of the ratios, weighted by a
+  uniform prior over parameters and factors);
+* :func:`oracle_change_posterior` (``oracle``) — the log posterior odds that a fault has
+  happened, for hypotheses that are the catalogue's true post-fault values and change times on
+  the grid the truth is drawn from (:mod:`railpaper.engine.changepoint`): it knows the answer
+  up to which fault and when, so its gap to ``bayes`` is the value of knowing the fault.
 
 All of them filter with the record's own process noise (the track input's changes, chapter 003)
 from the state at rest; the sample time is the run's ``dt_s``.
@@ -25,11 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from railpaper.engine import (LinearGaussianBatch, change_likelihoods, change_posterior,
-                              cusum_variance, run_rbpf, whitened_innovations)
+from railpaper.engine import (LinearGaussianBatch, WindowedChangeStatistics, change_likelihoods,
+                              change_posterior, cusum_variance, whitened_innovations,
+                              windowed_change_statistics)
 from railpaper.experiments.lateral_vehicle import LateralRecord
 from railpaper.experiments.suspension_fault_detection.result import Fault
-from railpaper.experiments.suspension_fault_detection.spec import TRACKED, Settings
 from railpaper.models import lateral_16state
 
 #: Initial state covariance of every filter (the vehicle starts at rest), state units squared.
@@ -64,8 +69,8 @@ def windowed_chi2(innovations: np.ndarray, window: int) -> np.ndarray:
     return total
 
 
-def hypotheses(faults: list[Fault], theta: np.ndarray) -> tuple[list[str], np.ndarray]:
-    """The exact reference's post-fault values: one per abrupt fault (names, θ (V, 5))."""
+def oracle_hypotheses(faults: list[Fault], theta: np.ndarray) -> tuple[list[str], np.ndarray]:
+    """The oracle's post-fault values: one per abrupt fault of the run (names, θ (V, 5))."""
     names, values = [], []
     for fault in faults:
         if fault.kind != "abrupt":
@@ -78,13 +83,17 @@ def hypotheses(faults: list[Fault], theta: np.ndarray) -> tuple[list[str], np.nd
 
 
 @dataclass(frozen=True)
-class ExactPosterior:
-    """The exact reference on one record.
+class OraclePosterior:
+    """The oracle on one record.
 
     Attributes
     ----------
     p_changed : ndarray, (K,)
         P(the fault has happened by sample k | y_1..k).
+    log_odds : ndarray, (K,)
+        Its log odds, log P(happened) − log P(not yet), natural log: the alarm statistic
+        (the same alarms as ``p_changed`` at the matching threshold, and unbounded, so a
+        false-alarm tail can be fitted to it).
     fault_time_posterior : ndarray, (J,)
         P(fault step = grid step j | y_1..K, a fault happened).
     value_posterior : ndarray, (V,)
@@ -94,22 +103,23 @@ class ExactPosterior:
     """
 
     p_changed: np.ndarray
+    log_odds: np.ndarray
     fault_time_posterior: np.ndarray
     value_posterior: np.ndarray
     filter_steps: int
 
 
-def exact_change_posterior(system, theta: np.ndarray, record: LateralRecord,
-                           values: np.ndarray, fault_steps: np.ndarray, p_no_fault: float
-                           ) -> ExactPosterior:
+def oracle_change_posterior(system, theta: np.ndarray, record: LateralRecord,
+                            values: np.ndarray, fault_steps: np.ndarray, p_no_fault: float
+                            ) -> OraclePosterior:
     """The posterior of (which fault, when) given the record, uniform prior over ``values``
     (V, 5) and the grid ``fault_steps`` (1-based first post-fault steps) that lie inside the
     record, and ``p_no_fault`` on no fault."""
     K = len(record.y)
     inside = fault_steps[fault_steps <= K]
     if inside.size == 0:                          # the record ended before any fault time
-        return ExactPosterior(np.zeros(K), np.zeros(len(fault_steps)),
-                              np.full(len(values), 1.0 / len(values)), 0)
+        return OraclePosterior(np.zeros(K), np.full(K, -np.inf), np.zeros(len(fault_steps)),
+                               np.full(len(values), 1.0 / len(values)), 0)
     lik = change_likelihoods(system, record.y, theta, values, inside,
                              np.zeros(lateral_16state.N_STATES),
                              P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps)
@@ -119,46 +129,57 @@ def exact_change_posterior(system, theta: np.ndarray, record: LateralRecord,
     post = change_posterior(lik, p_no_change=p_none, prior=prior)
     tau = np.zeros(len(fault_steps))
     tau[:inside.size] = post.tau_posterior
-    return ExactPosterior(post.p_changed, tau, post.value_posterior, lik.filter_steps)
+    return OraclePosterior(post.p_changed, post.log_odds_changed, tau, post.value_posterior,
+                           lik.filter_steps)
 
 
-def tracked_system(system, theta: np.ndarray):
-    """``system`` of the two tracked parameters (:data:`TRACKED`, in their units), the others
-    held at ``theta``."""
-    columns = [lateral_16state.PARAM_NAMES.index(name) for name in TRACKED]
+@dataclass(frozen=True)
+class BankHypotheses:
+    """The post-fault values of the detectors that do not know the fault: every model parameter
+    (``lateral_16state.PARAM_NAMES``) times every factor, one at a time.
 
-    def reduced(tracked: np.ndarray) -> LinearGaussianBatch:
-        tracked = np.atleast_2d(tracked)
-        full = np.repeat(theta[None], len(tracked), axis=0)
-        full[:, columns] = tracked
-        return system(full)
+    Attributes
+    ----------
+    parameter : ndarray of int, (V,)
+        Index of the changed parameter in ``PARAM_NAMES``.
+    factor : ndarray, (V,)
+        Its value after the change, fraction of nominal.
+    values : ndarray, (V, 5)
+        θ after the change (the parameters' units).
+    """
 
-    return reduced
-
-
-def rbpf_estimates(settings: Settings, system, theta: np.ndarray, record: LateralRecord,
-                   seed: int) -> np.ndarray:
-    """The RBPF's estimates of the tracked parameters after every sample, fraction of nominal
-    (K, 2): ``n_particles`` particles from nominal × U(``prior_low``, ``prior_high``) (generator
-    ``[seed, 11]``), the paper's scheme (resample and Liu–West move every step,
-    δ = ``paper_delta``)."""
-    columns = [lateral_16state.PARAM_NAMES.index(name) for name in TRACKED]
-    nominal = theta[columns]
-    rng = np.random.default_rng([seed, 11])
-    cloud = nominal * rng.uniform(settings.prior_low, settings.prior_high,
-                                  (settings.n_particles, 2))
-    run = run_rbpf(tracked_system(system, theta), record.y, cloud,
-                   np.zeros(lateral_16state.N_STATES), P0_SCALE * np.eye(lateral_16state.N_STATES),
-                   rng, u=record.u_mps, scheme="paper",
-                   delta=settings.paper_delta)
-    return run.theta_mean / nominal
+    parameter: np.ndarray
+    factor: np.ndarray
+    values: np.ndarray
 
 
-def rbpf_departure(relative: np.ndarray) -> np.ndarray:
-    """The RBPF detector's statistic (K,): max over the tracked parameters of |θ̂/θ − 1|."""
-    return np.max(np.abs(relative - 1.0), axis=1)
+def bank_hypotheses(theta: np.ndarray, factors: np.ndarray) -> BankHypotheses:
+    """Parameter by parameter, factor by factor (parameter-major order)."""
+    names = lateral_16state.PARAM_NAMES
+    parameter = np.repeat(np.arange(len(names)), len(factors))
+    factor = np.tile(np.asarray(factors, float), len(names))
+    values = np.repeat(theta[None], len(parameter), axis=0)
+    values[np.arange(len(parameter)), parameter] *= factor
+    return BankHypotheses(parameter=parameter, factor=factor, values=values)
 
 
-__all__ = ["ExactPosterior", "exact_change_posterior", "hypotheses", "nominal_innovations",
-           "rbpf_departure", "rbpf_estimates", "residual_cusum", "tracked_system",
-           "windowed_chi2"]
+def change_bank(system, theta: np.ndarray, record: LateralRecord, hypotheses: BankHypotheses,
+                window_steps: int, first_change_step: int) -> WindowedChangeStatistics:
+    """``glr`` and ``bayes`` on one record: the window-limited GLR and log mixture
+    Shiryaev–Roberts statistic over ``hypotheses`` (uniform prior) and every change step from
+    ``first_change_step`` on, the last ``window_steps`` of them at each step.  A record that
+    ends before ``first_change_step`` gets statistics of −inf throughout."""
+    K = len(record.y)
+    if K < first_change_step:
+        none = np.full(K, -np.inf)
+        return WindowedChangeStatistics(none, none.copy(), np.full(K, -1), np.full(K, -1),
+                                        window_steps, 0)
+    return windowed_change_statistics(system, record.y, theta, hypotheses.values, window_steps,
+                                      np.zeros(lateral_16state.N_STATES),
+                                      P0_SCALE * np.eye(lateral_16state.N_STATES),
+                                      u=record.u_mps, first_change_step=first_change_step)
+
+
+__all__ = ["BankHypotheses", "OraclePosterior", "bank_hypotheses", "change_bank",
+           "nominal_innovations", "oracle_change_posterior", "oracle_hypotheses",
+           "residual_cusum", "windowed_chi2"]

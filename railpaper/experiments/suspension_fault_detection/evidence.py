@@ -1,6 +1,7 @@
 """From every record's statistics to the appendix's evidence: thresholds at one false-alarm
-probability, alarms, delays, detection rates, false alarms per hour, post-fault estimates and
-ROC curves — each with its 95 % interval over records.
+probability and at mean times between false alarms, alarms, delays, detection rates, false
+alarms per hour, post-fault estimates, which parameter is blamed and ROC curves — each with its
+95 % interval over records.
 
 Definitions (times in s from the record's start):
 
@@ -15,13 +16,20 @@ Definitions (times in s from the record's start):
   is beyond the record where fewer than half the records are alarmed (then no number is
   written: ``delay_median_reached_<tag>`` is False);
 * *detected within d*: the alarm falls in (τ, τ + d]; a record alarmed before its fault, never,
-  or cut at flange contact before τ + d without an alarm is not.
+  or cut at flange contact before τ + d without an alarm is not;
+* *threshold for T hours between false alarms*: the calibration records' monitoring windows
+  are cut into blocks of ``false_alarm_block_s``; an exponential tail is fitted to the largest
+  fifth of the block maxima (:func:`railpaper.monitoring.fit_exponential_tail`, one alarm per
+  exceeding block) and solved for T; the tail is checked on the evaluation records at the
+  shortest mean time they resolve (:func:`tail_check`) — far short of T, so the thresholds at
+  T are the tail model's extrapolation, not a measurement.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.stats import poisson as poisson_distribution
 
 from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import (
@@ -30,12 +38,22 @@ from railpaper.experiments.suspension_fault_detection.result import (
     RecordRun,
     speed_key,
 )
-from railpaper.experiments.suspension_fault_detection.spec import WITHIN_S, Settings
+from railpaper.experiments.suspension_fault_detection.spec import (
+    MTBFA_CURVE_H,
+    MTBFA_TARGETS_H,
+    WITHIN_S,
+    Settings,
+)
 from railpaper.monitoring import (
+    SECONDS_PER_HOUR,
+    ExponentialTail,
+    block_maxima,
     detected_within,
+    fit_exponential_tail,
     kaplan_meier_median,
     mean_time_between_false_alarms_h,
     restarted_cusum_alarms,
+    shiryaev_roberts_mtbfa_lower_h,
 )
 from railpaper.stats import median_interval, quantile_ranks, rate
 
@@ -228,14 +246,123 @@ def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
     return rows
 
 
+def isolation_metrics(runs: list[RecordRun], outcomes: pd.DataFrame, dt_s: float,
+                      hypothesis_parameter: np.ndarray, parameter: int, tag: str) -> dict:
+    """Of one fault's records that a detector alarmed after the fault, how many the GLR's best
+    hypothesis at the alarm blames on the faulted parameter (``isolated_<tag>`` with its
+    Clopper–Pearson interval and count): the diagnosis that comes with an alarm of the
+    detectors that do not know the fault."""
+    right = []
+    for run, (_, row) in zip(runs, outcomes.iterrows()):
+        if not np.isfinite(row["delay_s"]) or run.bank_hypothesis is None:
+            continue
+        best = int(run.bank_hypothesis[int(round(row["alarm_s"] / dt_s)) - 1])
+        right.append(best >= 0 and int(hypothesis_parameter[best]) == parameter)
+    return rate(right).metrics(f"isolated_{tag}") if right else {}
+
+
+def false_alarm_tail(runs: list[RecordRun], detector: str, first_row: int, block_rows: int,
+                     dt_s: float) -> ExponentialTail | None:
+    """The exponential tail of one detector's block maxima over fault-free records
+    (:func:`railpaper.monitoring.fit_exponential_tail`, blocks of ``block_rows`` samples from
+    the monitoring window's start, each record's real length); None when there are too few
+    blocks."""
+    maxima = np.concatenate([block_maxima(r.statistics[detector], first_row, block_rows)
+                             for r in runs] or [np.zeros(0)])
+    try:
+        return fit_exponential_tail(maxima, block_rows * dt_s)
+    except ValueError:
+        return None
+
+
+def tail_check(tail: ExponentialTail, runs: list[RecordRun], detector: str, first_row: int,
+               block_rows: int, tag: str, expected: float = 5.0) -> dict:
+    """The tail model against a direct count on other fault-free records: at the threshold the
+    tail predicts ``expected`` exceeding blocks in their running (or at its level, if that
+    predicts fewer), the blocks that do exceed it.  ``tail_check_mtbfa_h_<tag>`` (the mean time
+    between false alarms checked, h), ``tail_check_expected_<tag>``, ``tail_check_alarms_<tag>``
+    and ``tail_check_p_<tag>`` (the two-sided Poisson p-value of the count)."""
+    maxima = np.concatenate([block_maxima(r.statistics[detector], first_row, block_rows)
+                             for r in runs] or [np.zeros(0)])
+    if maxima.size == 0:
+        return {}
+    running_h = maxima.size * tail.block_s / SECONDS_PER_HOUR
+    mtbfa_h = max(running_h / expected, tail.mtbfa_h(tail.level))
+    h = tail.threshold(mtbfa_h)
+    mean = running_h / mtbfa_h
+    alarms = int(np.sum(maxima > h))
+    p = min(1.0, 2.0 * min(poisson_distribution.cdf(alarms, mean),
+                           poisson_distribution.sf(alarms - 1, mean)))
+    return {f"tail_check_mtbfa_h_{tag}": mtbfa_h, f"tail_check_expected_{tag}": mean,
+            f"tail_check_alarms_{tag}": alarms, f"tail_check_p_{tag}": p}
+
+
+def operating_point_metrics(tail: ExponentialTail, runs_of: dict, detector: str,
+                            first_row: int, dt_s: float, speed_tag: str,
+                            hypothesis_parameter: np.ndarray | None = None,
+                            fault_parameter: dict[str, int] | None = None) -> dict:
+    """At each mean time between false alarms of :data:`MTBFA_TARGETS_H`: the tail's threshold
+    (``threshold_at_<T>h_<detector>_<speed>``; for ``bayes`` also the Shiryaev–Roberts lower
+    bound on the mean time at that threshold, ``sr_bound_mtbfa_h_at_<T>h_bayes_<speed>``) and,
+    per fault, :func:`fault_metrics` at it (detection within each horizon with its interval,
+    early alarms, the median delay, the delays as survival data:
+    ``…_<detector>_<fault>_<speed>_at_<T>h``) and, for ``glr`` and ``bayes`` given the
+    hypotheses' and faults' parameters, :func:`isolation_metrics` at it."""
+    m = {}
+    for target in MTBFA_TARGETS_H:
+        h = tail.threshold(target)
+        m[f"threshold_at_{target:g}h_{detector}_{speed_tag}"] = h
+        if detector == "bayes":
+            m[f"sr_bound_mtbfa_h_at_{target:g}h_bayes_{speed_tag}"] = \
+                shiryaev_roberts_mtbfa_lower_h(h, dt_s)
+        for fault, runs in runs_of.items():
+            outcomes = detector_outcomes(runs, detector, h, first_row, dt_s)
+            tag = f"{detector}_{fault}_{speed_tag}_at_{target:g}h"
+            m.update(fault_metrics(outcomes, tag))
+            if detector in ("glr", "bayes") and hypothesis_parameter is not None \
+                    and fault_parameter is not None:
+                m.update(isolation_metrics(runs, outcomes, dt_s, hypothesis_parameter,
+                                           fault_parameter[fault], tag))
+    return m
+
+
+def delay_curve_rows(tail: ExponentialTail, runs_of: dict, detector: str, first_row: int,
+                     dt_s: float, speed_kmh: float) -> list[dict]:
+    """Rows of the delay against mean time between false alarms picture: on the grid
+    :data:`MTBFA_CURVE_H` (from the tail's level on), per fault, the Kaplan–Meier median delay
+    (NaN: not reached) and the probability of detection within 2 s."""
+    rows = []
+    for mtbfa_h in MTBFA_CURVE_H:
+        if mtbfa_h < tail.mtbfa_h(tail.level):
+            continue
+        h = tail.threshold(mtbfa_h)
+        for fault, runs in runs_of.items():
+            m = survival_delay_metrics(detector_outcomes(runs, detector, h, first_row, dt_s), "x")
+            rows.append({"detector": detector, "speed_kmh": speed_kmh, "fault": fault,
+                         "mtbfa_h": mtbfa_h, "threshold": h,
+                         "km_delay_median_s": m.get("km_delay_median_s_x", np.nan),
+                         "km_detected_within_2s": m.get("km_detected_within_2s_x", np.nan)})
+    return rows
+
+
 def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float, ...],
-             faults: list[str], settings: Settings, dt_s: float, monitor_from_s: float
-             ) -> tuple[dict, dict, pd.DataFrame]:
+             faults: list[str], settings: Settings, dt_s: float, monitor_from_s: float,
+             hypothesis_parameter: np.ndarray | None = None,
+             fault_parameter: dict[str, int] | None = None
+             ) -> tuple[dict, dict, pd.DataFrame, pd.DataFrame]:
     """Thresholds, metrics and ROC points of every detector, speed and fault (``settings``:
-    the run's ``duration_s`` and ``false_alarm_probability``)."""
+    the run's ``duration_s`` and ``false_alarm_probability``); with ``hypothesis_parameter``
+    (the changed parameter of each of ``glr``/``bayes``' hypotheses) and ``fault_parameter``
+    (each fault's), also which parameter those two blame at their alarms.  Besides the
+    thresholds at the run's false-alarm probability, each detector's thresholds at the mean
+    times between false alarms of :data:`MTBFA_TARGETS_H` (an exponential tail of its
+    calibration records' block maxima, checked on the evaluation records) and its delays
+    there; the fourth value returned is the delay against mean time between false alarms
+    table (:func:`delay_curve_rows`)."""
     first_row = window_rows(dt_s, monitor_from_s)
     window_s = settings.duration_s - monitor_from_s
-    metrics, thresholds, roc = {}, {}, []
+    block_rows = max(1, int(round(settings.false_alarm_block_s / dt_s)))
+    metrics, thresholds, roc, curve = {}, {}, [], []
     for speed in speeds:
         at = [r for r in records if r.speed_kmh == speed]
         for fault in faults:
@@ -257,7 +384,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
             metrics[f"threshold_{tag}"] = h
             metrics.update(false_alarm_metrics(evaluation, detector, h, first_row, window_s,
                                                tag))
-            if detector == "residual":         # a CUSUM: restarts recoverable from its path
+            if detector == "cusum":            # a CUSUM: restarts recoverable from its path
                 metrics.update(mean_time_between_false_alarms_metrics(*cusum_false_alarms(
                     [r.statistics[detector] for r in evaluation], h, first_row, dt_s), tag))
             outcomes_of = {}
@@ -269,10 +396,29 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
                 ftag = f"{detector}_{fault}_{speed_key(speed)}"
                 metrics.update(fault_metrics(outcomes_of[fault], ftag))
                 metrics.update(estimate_metrics(runs, detector, ftag))
+                if detector in ("glr", "bayes") and hypothesis_parameter is not None \
+                        and fault_parameter is not None:
+                    metrics.update(isolation_metrics(runs, outcomes_of[fault], dt_s,
+                                                     hypothesis_parameter,
+                                                     fault_parameter[fault], ftag))
             for row in roc_rows(calibration, evaluation, outcomes_of, detector, first_row,
                                 window_s):
                 roc.append(dict(row, speed_kmh=speed))
-    return metrics, thresholds, pd.DataFrame(roc)
+            tail = false_alarm_tail(calibration, detector, first_row, block_rows, dt_s)
+            if tail is None:
+                continue
+            metrics.update({f"tail_level_{tag}": tail.level, f"tail_scale_{tag}": tail.scale,
+                            f"tail_exceed_{tag}": tail.exceed, f"tail_blocks_{tag}": tail.blocks})
+            metrics.update(tail_check(tail, evaluation, detector, first_row, block_rows, tag))
+            runs_of = {f: [r for r in have if r.fault == f] for f in faults}
+            runs_of = {f: runs for f, runs in runs_of.items() if runs}
+            metrics.update(operating_point_metrics(tail, runs_of, detector, first_row, dt_s,
+                                                   speed_key(speed), hypothesis_parameter,
+                                                   fault_parameter))
+            curve += delay_curve_rows(tail, runs_of, detector, first_row, dt_s, speed)
+    return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
-__all__ = ["censored_median", "evidence", "threshold", "window_rows"]
+__all__ = ["censored_median", "delay_curve_rows", "evidence", "false_alarm_tail",
+           "isolation_metrics", "operating_point_metrics", "tail_check", "threshold",
+           "window_rows"]

@@ -3,10 +3,10 @@
 The whole computation as a function of the settings.  At every speed of ``speeds_kmh``:
 ``records_per_fault`` records of each fault (:mod:`.faults`), the fault at a time drawn from the
 prior's grid (or ``fault_time_s``), and ``fault_free_records`` records without a fault (half set
-the thresholds, half count false alarms); on each, the residual CUSUM and the exact change
-posterior, and on the first ones at the first speed also paper 003's RBPF
-(:mod:`.detectors`).  :mod:`.evidence` turns the statistics into thresholds, delays, detection
-rates, false alarms per hour, post-fault estimates and ROC points.
+the thresholds, half count false alarms); on each, the five detectors of :mod:`.detectors`
+(cusum, chi2, glr, bayes and the oracle).  :mod:`.evidence` turns the statistics into
+thresholds, delays, detection rates, false alarms per hour, post-fault estimates, which
+parameter the detectors that do not know the fault blame, and ROC points.
 
 One record by hand::
 
@@ -30,7 +30,7 @@ import pandas as pd
 from railpaper.experiments.base import ParameterError, check_sample_time, default_progress
 from railpaper.experiments.lateral_vehicle import filter_system, vehicle
 from railpaper.experiments.suspension_fault_detection import detectors, faults, records
-from railpaper.experiments.suspension_fault_detection.evidence import evidence
+from railpaper.experiments.suspension_fault_detection.evidence import evidence, window_rows
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
     Fault,
@@ -38,7 +38,7 @@ from railpaper.experiments.suspension_fault_detection.result import (
     IllustratedRecord,
     RecordRun,
 )
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
+from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, Settings
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
@@ -94,14 +94,13 @@ def validate(settings: Settings) -> None:
         if value > most:
             raise ParameterError(f"parameter '{key}' must be <= {most} (seed ranges), got "
                                  f"{value}")
-    if settings.prior_low >= settings.prior_high:
-        raise ParameterError("parameter 'prior_low' must be below 'prior_high'")
     if not settings.false_alarm_probability < 1:
         raise ParameterError("parameter 'false_alarm_probability' must be < 1")
     if not settings.cusum_variance_ratio > 1:
         raise ParameterError("parameter 'cusum_variance_ratio' must be > 1 (a growth)")
-    if not 0 < settings.paper_delta < 1:
-        raise ParameterError("parameter 'paper_delta' must be in (0, 1)")
+    if window_steps(settings) < 1:
+        raise ParameterError(f"parameter 'bank_window_s' = {settings.bank_window_s:g} s is "
+                             f"shorter than one sample ({settings.dt_s:g} s)")
     fixed, theta = vehicle()
     for speed in settings.speeds_kmh:
         check_sample_time("dt_s", settings.dt_s,
@@ -109,19 +108,21 @@ def validate(settings: Settings) -> None:
                           f"the lateral vehicle at {speed:g} km/h")
 
 
-def plan(settings: Settings, chosen: list[Fault]) -> list[tuple[str, str, int, bool]]:
-    """(fault, role, seed, with RBPF) of every record at one speed, in run order (the RBPF only
-    where the speed is the first)."""
+def window_steps(settings: Settings) -> int:
+    """W of ``glr`` and ``bayes``: ``bank_window_s`` in samples."""
+    return int(round(settings.bank_window_s / settings.dt_s))
+
+
+def plan(settings: Settings, chosen: list[Fault]) -> list[tuple[str, str, int]]:
+    """(fault, role, seed) of every record at one speed, in run order."""
     items = []
     for fault in chosen:
         for i in range(settings.records_per_fault):
-            items.append((fault.name, "fault", settings.seed + i,
-                          i < settings.rbpf_records_per_fault))
+            items.append((fault.name, "fault", settings.seed + i))
     half = settings.fault_free_records // 2
     for role, offset in FREE_SEED_OFFSETS.items():
         for i in range(half):
-            items.append((NO_FAULT, role, settings.seed + offset + i,
-                          i < settings.rbpf_fault_free_records // 2))
+            items.append((NO_FAULT, role, settings.seed + offset + i))
     return items
 
 
@@ -135,10 +136,11 @@ def fault_time(settings: Settings, grid_s: np.ndarray, seed: int) -> float:
 
 def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
                fault: Fault | None, role: str, speed_kmh: float, seed: int, values: np.ndarray,
-               with_rbpf: bool) -> tuple[RecordRun, dict]:
+               bank: detectors.BankHypotheses) -> tuple[RecordRun, dict]:
     """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
-    what the illustration needs (RBPF estimates, the exact posterior's fault time and value).
-    ``fault_settings`` are the catalogue's (:func:`.faults.catalogue`)."""
+    what the illustration needs (the oracle's posterior).  ``fault_settings`` are the
+    catalogue's (:func:`.faults.catalogue`), ``values`` the oracle's hypotheses and ``bank``
+    those of ``glr`` and ``bayes``."""
     grid_s = faults.fault_times_s(fault_settings)
     tau = fault_time(settings, grid_s, seed) if fault is not None else -1.0
     rec = records.simulate_faulted(settings, fault_settings, fixed, theta, fault, max(tau, 0.0),
@@ -146,54 +148,57 @@ def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.
     system = filter_system(records.record_settings(settings, speed_kmh), fixed, theta,
                            rec.record, theta_ref=theta)
     steps = np.round(grid_s / settings.dt_s).astype(int) + 1
-    exact = detectors.exact_change_posterior(system, theta, rec.record, values, steps,
-                                             fault_settings["p_no_fault"])
+    oracle = detectors.oracle_change_posterior(system, theta, rec.record, values, steps,
+                                               fault_settings["p_no_fault"])
     innovations = detectors.nominal_innovations(system, theta, rec.record)
-    statistics = {"residual": detectors.residual_cusum(system, theta, rec.record,
-                                                       settings.cusum_variance_ratio,
-                                                       innovations),
+    W = window_steps(settings)
+    first_step = evidence_window_row(settings, grid_s) + 1          # the window's first step
+    changes = detectors.change_bank(system, theta, rec.record, bank, W,
+                                    max(2, first_step - W + 1))
+    statistics = {"cusum": detectors.residual_cusum(system, theta, rec.record,
+                                                    settings.cusum_variance_ratio, innovations),
                   "chi2": detectors.windowed_chi2(innovations, settings.chi2_window_samples),
-                  "exact": exact.p_changed}
+                  "glr": changes.glr,
+                  "bayes": changes.log_shiryaev_roberts,
+                  "oracle": oracle.log_odds}
     j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     estimate = {}
     if j is not None:
-        estimate["exact"] = float(exact.value_posterior @ (values[:, j] / theta[j]))
-    extra = {"exact": exact}
-    if with_rbpf:
-        relative = detectors.rbpf_estimates(settings, system, theta, rec.record, seed)
-        statistics["rbpf"] = detectors.rbpf_departure(relative)
-        if j is not None and fault.parameter in TRACKED:
-            estimate["rbpf"] = float(relative[-1, TRACKED.index(fault.parameter)])
-        extra["rbpf_relative"] = relative
+        estimate["oracle"] = float(oracle.value_posterior @ (values[:, j] / theta[j]))
+        best = int(changes.glr_value[-1]) if len(changes.glr_value) else -1
+        if best >= 0:
+            estimate["glr"] = float(bank.factor[best]) if bank.parameter[best] == j else 1.0
     run = RecordRun(fault=NO_FAULT if fault is None else fault.name, role=role,
                     speed_kmh=speed_kmh, seed=seed, fault_time_s=tau,
                     end_s=rec.end_step * settings.dt_s, flange_contact=rec.flange_contact,
                     statistics=statistics, post_fault_estimate=estimate,
-                    true_factor_end=float(rec.factor[-1]) if len(rec.factor) else 1.0)
-    extra["factor"] = rec.factor
-    return run, extra
+                    true_factor_end=float(rec.factor[-1]) if len(rec.factor) else 1.0,
+                    bank_hypothesis=changes.glr_value)
+    return run, {"oracle": oracle, "factor": rec.factor}
 
 
-def illustration(run: RecordRun, extra: dict, fault: Fault, names: list[str], grid_s, dt_s
+def evidence_window_row(settings: Settings, grid_s: np.ndarray) -> int:
+    """First row (0-based) of the monitoring window (:func:`.evidence.window_rows` at the
+    prior's first fault time)."""
+    return window_rows(settings.dt_s, float(grid_s[0]))
+
+
+def illustration(run: RecordRun, extra: dict, names: list[str], grid_s, dt_s
                  ) -> IllustratedRecord:
     """The illustrated record's :class:`IllustratedRecord`."""
-    true = np.ones((len(extra["factor"]), len(TRACKED)))
-    if fault.parameter in TRACKED:
-        true[:, TRACKED.index(fault.parameter)] = extra["factor"]
-    exact = extra["exact"]
-    return IllustratedRecord(run=run, dt_s=dt_s, rbpf_relative=extra["rbpf_relative"],
-                             true_relative=true, fault_times_s=np.asarray(grid_s),
-                             fault_time_posterior=exact.fault_time_posterior,
+    oracle = extra["oracle"]
+    return IllustratedRecord(run=run, dt_s=dt_s, fault_times_s=np.asarray(grid_s),
+                             fault_time_posterior=oracle.fault_time_posterior,
                              value_posterior=dict(zip(names, map(float,
-                                                                 exact.value_posterior))))
+                                                                 oracle.value_posterior))))
 
 
 def run(settings: Settings, *, progress=None) -> FaultDetectionResult:
     """Run the appendix with ``settings`` (of :data:`SPEC`; a quick run's sizes are already in
     them).  Everything runs on one numba and one OpenBLAS thread
-    (:func:`railpaper.threads.one_thread`): the Kalman banks here are a few dozen filters of 16
-    states, which a second thread does not speed up, and a chapter that shares the machine with
-    another waits for its own threads otherwise."""
+    (:func:`railpaper.threads.one_thread`): the Kalman banks here are a few hundred filters of
+    16 states, stepped one sample at a time, which a second thread hardly speeds up, and a
+    chapter that shares the machine with another waits for its own threads otherwise."""
     with one_thread():
         return _run(settings, progress)
 
@@ -207,56 +212,55 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
     _, fault_settings = faults.catalogue()
     chosen = chosen_faults(settings)
     by_name = {f.name: f for f in chosen}
-    names, values = detectors.hypotheses(chosen, theta)
+    names, values = detectors.oracle_hypotheses(chosen, theta)
     if not names:
-        raise ParameterError("parameter 'faults': the exact reference needs at least one abrupt "
-                             "fault")
+        raise ParameterError("parameter 'faults': the oracle needs at least one abrupt fault")
+    bank = detectors.bank_hypotheses(theta, faults.bayes_factors())
     grid_s = faults.fault_times_s(fault_settings)
     speeds = settings.speeds_kmh
-    records_, illustrated, spent = [], None, {"rbpf": 0.0, "other": 0.0}
+    records_, illustrated = [], None
     items = plan(settings, chosen)
     total = len(items) * len(speeds)
     for s, speed in enumerate(speeds):
-        for i, (fault_name, role, seed, with_rbpf) in enumerate(items):
+        for i, (fault_name, role, seed) in enumerate(items):
             progress(0.95 * (s * len(items) + i) / total,
                      f"{speed:g} km/h, {fault_name}, seed {seed}")
-            t0 = time.perf_counter()
-            use_rbpf = with_rbpf and s == 0
             run_, extra = run_record(settings, fault_settings, fixed, theta,
-                                     by_name.get(fault_name), role, speed, seed, values, use_rbpf)
-            spent["rbpf" if use_rbpf else "other"] += time.perf_counter() - t0
+                                     by_name.get(fault_name), role, speed, seed, values, bank)
             records_.append(run_)
             if illustrated is None and s == 0 and role == "fault":
-                illustrated = illustration(run_, extra, by_name[fault_name], names, grid_s,
-                                           settings.dt_s)
+                illustrated = illustration(run_, extra, names, grid_s, settings.dt_s)
     monitor_from = float(grid_s[0])
-    metrics, thresholds, roc = evidence(records_, list(DETECTORS), speeds,
+    metrics, thresholds, roc, delay_curve = evidence(records_, list(DETECTORS), speeds,
                                         [f.name for f in chosen], settings, settings.dt_s,
-                                        monitor_from)
+                                        monitor_from, bank.parameter,
+                                        {f.name: lateral_16state.PARAM_NAMES.index(f.parameter)
+                                         for f in chosen})
     critical = faults.critical_speeds(fixed, theta, chosen)
     for row in critical.itertuples():
         metrics[f"critical_speed_kmh_{row.fault}"] = row.critical_speed_kmh
     metrics["records"] = len(records_)
     progress(1.0, "done")
-    timings = {"records_with_rbpf_s": spent["rbpf"], "records_without_rbpf_s": spent["other"],
-               "total_s": time.perf_counter() - started}
+    timings = {"total_s": time.perf_counter() - started}
     return FaultDetectionResult(metrics=metrics, timings=timings,
                                 timeseries=_timeseries(illustrated), faults=tuple(chosen),
                                 records=tuple(records_), thresholds=thresholds,
                                 dt_s=settings.dt_s, monitor_from_s=monitor_from,
-                                critical_speeds=critical, roc=roc, illustrated=illustrated)
+                                critical_speeds=critical, roc=roc, illustrated=illustrated,
+                                delay_curve=delay_curve,
+                                bank_hypotheses=tuple(
+                                    (lateral_16state.PARAM_NAMES[j], float(f))
+                                    for j, f in zip(bank.parameter, bank.factor)))
 
 
 def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
-    """The illustrated record's statistics and estimates, one row per sample."""
+    """The illustrated record's statistics, one row per sample."""
     run_ = ill.run
-    K = len(run_.statistics["exact"])
+    K = len(run_.statistics["oracle"])
     out = pd.DataFrame({"t_s": ill.dt_s * np.arange(1, K + 1)})
     for name, stat in run_.statistics.items():
         out[f"statistic_{name}"] = stat
-    for j, name in enumerate(TRACKED):
-        out[f"rbpf_{name}_relative"] = ill.rbpf_relative[:, j]
-        out[f"true_{name}_relative"] = ill.true_relative[:, j]
+    out["glr_hypothesis"] = run_.bank_hypothesis
     return out
 
 

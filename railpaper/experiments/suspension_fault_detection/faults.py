@@ -42,6 +42,18 @@ def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
     return faults, {k: float(q.value) for k, q in quantities.items()}
 
 
+def bayes_factors(path=FAULTS_FILE) -> np.ndarray:
+    """The post-fault factors of the detectors that do not know the fault (``[bayes] factors``
+    of the data file: fractions of nominal, each applied to each model parameter)."""
+    table = read_toml(path).get("bayes", {})
+    factors = np.asarray(table.get("factors", []), float)
+    if factors.ndim != 1 or not factors.size or np.any(factors < 0) \
+            or np.any(np.isclose(factors, 1.0)) or not table.get("reason"):
+        raise DataError(f"{path}: [bayes] needs 'factors' (a list of fractions of nominal, none "
+                        "of them 1) and a 'reason'")
+    return factors
+
+
 def fault_times_s(fault_settings: dict) -> np.ndarray:
     """The prior's grid of fault times, s (uniform over it)."""
     first, last, step = (fault_settings[k] for k in ("fault_time_first_s", "fault_time_last_s",
@@ -106,5 +118,5 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
     return pd.DataFrame(rows)
 
 
-__all__ = ["FAULTS_FILE", "SETTINGS", "catalogue", "critical_speeds", "factor_at",
+__all__ = ["FAULTS_FILE", "SETTINGS", "bayes_factors", "catalogue", "critical_speeds", "factor_at",
            "fault_times_s", "schedule"]

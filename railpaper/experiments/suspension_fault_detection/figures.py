@@ -3,8 +3,8 @@ axes, outside the data).
 
 Each function takes the run's :class:`FaultDetectionResult` and its settings and returns the
 figure; the notebook saves it and shows it as a numbered MyST figure.  Detectors keep one colour
-and marker throughout (:data:`DETECTOR_STYLES`); a detector that did not run at a speed (the RBPF
-beyond the first) is left out of that speed's panels.
+and marker throughout (:data:`DETECTOR_STYLES`); a detector without a metric at a speed is left
+out of that speed's panels.
 """
 
 from __future__ import annotations
@@ -20,7 +20,11 @@ from railpaper.experiments.suspension_fault_detection.result import (
     read_censored_median,
     speed_key,
 )
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, TRACKED, Settings
+from railpaper.experiments.suspension_fault_detection.spec import (
+    DETECTORS,
+    MTBFA_TARGETS_H,
+    Settings,
+)
 from railpaper.experiments.suspension_fault_detection.tables import (
     DETECTOR_SHORT,
     PARAMETERS,
@@ -28,10 +32,11 @@ from railpaper.experiments.suspension_fault_detection.tables import (
 )
 
 #: Colour and marker of each detector.
-DETECTOR_STYLES = {"residual": ("C0", "o"), "chi2": ("C1", "v"), "rbpf": ("C2", "s"),
-                   "exact": ("C3", "D")}
-#: Colours of the tracked parameters' estimates.
-PARAMETER_COLOURS = ("C0", "C1")
+DETECTOR_STYLES = {"cusum": ("C0", "o"), "chi2": ("C1", "v"), "glr": ("C4", "^"),
+                   "bayes": ("C2", "s"), "oracle": ("C3", "D")}
+#: Line styles where detectors' curves coincide (the GLR drawn dashed above Shiryaev–Roberts,
+#: whose alarms it often shares).
+LINE_STYLES = {"glr": "--"}
 #: Where a censored delay ("beyond the record") is drawn, as a multiple of the longest delay a
 #: record can show.
 BEYOND_FACTOR = 1.6
@@ -62,56 +67,49 @@ def _mark_events(ax, run, monitor_from_s: float) -> None:
         ax.axvline(run.end_s, color="k", lw=1.4)
 
 
+def _hypothesis_label(result, index: int) -> str:
+    """"$C_{saly}$ × 0.3": the GLR's hypothesis ``index``."""
+    name, factor = result.bank_hypotheses[index]
+    return f"{PARAMETERS.get(name, (name, name, ''))[1]} × {factor:g}"
+
+
 def record_around_fault(result, settings: Settings):
-    """The illustrated record (first speed): (a) the RBPF's estimates of K_sy and C_saly as
-    fractions of nominal with their true values (dashed), (b) the residual CUSUM statistic,
-    (c) the exact posterior probability that a fault has happened and (d) the RBPF's departure
-    statistic, each with its alarm threshold; the true fault time (and flange contact, where the
-    record ends at it) marked in every panel. Without RBPF statistics, panels (a) and (d) are
-    left out."""
+    """The illustrated record (first speed): each detector's alarm statistic in a panel of its
+    own, with its alarm threshold and its first alarm in the monitoring window; the true fault
+    time (and flange contact, where the record ends at it) marked in every panel, and in the
+    GLR's panel the parameter its best hypothesis blames at that alarm."""
     ill = result.illustrated
     run = ill.run
     speed = run.speed_kmh
     stats = run.statistics
-    has_rbpf = "rbpf" in stats and ill.rbpf_relative is not None
-    panels = (["estimates"] if has_rbpf else []) + [
-        d for d in ("residual", "chi2", "exact", "rbpf") if d in stats]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 1.75 * len(panels) + 0.6),
+    panels = [d for d in DETECTORS if d in stats]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(7, 1.45 * len(panels) + 0.8),
                              sharex=True, squeeze=False)
     axes = axes[:, 0]
     K = len(next(iter(stats.values())))
     t = ill.dt_s * np.arange(1, K + 1)
-    titles = {"estimates": "RBPF estimates", "residual": DETECTORS["residual"],
-              "chi2": DETECTORS["chi2"],
-              "exact": DETECTORS["exact"], "rbpf": "RBPF departure from nominal"}
-    ylabels = {"residual": "CUSUM statistic", "chi2": "windowed χ² statistic",
-               "exact": "P(fault happened)",
-               "rbpf": "max |θ̂/θ − 1|"}
-    for letter, ax, panel in zip("abcd", axes, panels):
-        ax.set_title(f"({letter}) {titles[panel]}", fontsize=9, loc="left")
-        if panel == "estimates":
-            for j, (name, colour) in enumerate(zip(TRACKED, PARAMETER_COLOURS)):
-                ax.plot(t, ill.rbpf_relative[:K, j], color=colour, lw=1.0)
-                ax.plot(t, ill.true_relative[:K, j], color=colour, lw=1.4, ls="--")
-            ax.set_ylabel("fraction of nominal")
-        else:
-            colour = DETECTOR_STYLES[panel][0]
-            ax.plot(t, stats[panel], color=colour, lw=1.0)
-            h = result.thresholds.get((panel, speed))
-            if h is not None and np.isfinite(h):
-                ax.axhline(h, color="k", ls=":", lw=1.2)
-                hits = np.flatnonzero((t >= result.monitor_from_s - 1e-9) & (stats[panel] >= h))
-                if hits.size:
-                    ax.plot([t[hits[0]]], [h], marker="v", ms=7, color="k", ls="none",
-                            zorder=5)
-            if panel == "residual":
-                ax.set_yscale("symlog", linthresh=1.0)
-                ax.set_ylim(bottom=0.0)
-            elif panel == "rbpf":
-                ax.set_yscale("log")
-            else:
-                ax.set_ylim(-0.05, 1.05)
-            ax.set_ylabel(ylabels[panel])
+    ylabels = {"cusum": "CUSUM", "chi2": "windowed χ²", "glr": "GLR (nats)",
+               "bayes": "log R (nats)", "oracle": "log odds (nats)"}
+    for letter, ax, panel in zip("abcdefg", axes, panels):
+        ax.set_title(f"({letter}) {DETECTORS[panel]}", fontsize=9, loc="left")
+        colour = DETECTOR_STYLES[panel][0]
+        values = np.asarray(stats[panel], float)
+        shown = np.where(np.isfinite(values), values, np.nan)
+        ax.plot(t, shown, color=colour, lw=1.0)
+        h = result.thresholds.get((panel, speed))
+        if h is not None and np.isfinite(h):
+            ax.axhline(h, color="k", ls=":", lw=1.2)
+            hits = np.flatnonzero((t >= result.monitor_from_s - 1e-9) & (values >= h))
+            if hits.size:
+                ax.plot([t[hits[0]]], [h], marker="v", ms=7, color="k", ls="none", zorder=5)
+                if panel == "glr" and run.bank_hypothesis is not None \
+                        and result.bank_hypotheses:
+                    best = int(run.bank_hypothesis[hits[0]])
+                    if best >= 0:
+                        ax.annotate(f"blames {_hypothesis_label(result, best)}", (t[hits[0]], h),
+                                    xytext=(6, 6), textcoords="offset points", fontsize=8)
+        ax.set_yscale("symlog", linthresh=10.0)
+        ax.set_ylabel(ylabels[panel], fontsize=8)
         _mark_events(ax, run, result.monitor_from_s)
     axes[-1].set_xlabel("time from the record's start (s)")
     axes[-1].set_xlim(0, max(t[-1], run.end_s))
@@ -119,12 +117,6 @@ def record_around_fault(result, settings: Settings):
     label = fault.label if fault is not None else run.fault
     fig.suptitle(f"{label}, {speed:g} km/h (seed {run.seed})", fontsize=10)
     handles, labels = [], []
-    if has_rbpf:
-        for name, colour in zip(TRACKED, PARAMETER_COLOURS):
-            symbol = PARAMETERS.get(name, (name, name, ""))[1]
-            handles += [Line2D([], [], color=colour, lw=1.0),
-                        Line2D([], [], color=colour, lw=1.4, ls="--")]
-            labels += [f"RBPF estimate of {symbol}", f"true {symbol}"]
     handles += [Line2D([], [], color="k", ls=":", lw=1.2),
                 Line2D([], [], marker="v", ms=7, color="k", ls="none"),
                 Line2D([], [], color="grey", ls="--", lw=1.0), Patch(color="0.92")]
@@ -222,6 +214,64 @@ def delay_by_fault(result, settings: Settings):
     return fig
 
 
+def delay_vs_mtbfa(result, settings: Settings):
+    """The standard picture of a change detector: per speed (rows) and fault (columns), each
+    detector's Kaplan–Meier median detection delay (log y) against the mean time between false
+    alarms its threshold is set to (log x, hours), thresholds from each detector's exponential
+    tail of fault-free block maxima; the calibration records' own running marked (to its right
+    the tail is extrapolated), and the operating points of :data:`MTBFA_TARGETS_H` dotted.  A
+    curve stops where fewer than half the records are detected."""
+    curve = result.delay_curve
+    speeds, faults = settings.speeds_kmh, list(result.faults)
+    fig, axes = plt.subplots(len(speeds), len(faults), figsize=(7, 1.7 * len(speeds) + 1.3),
+                             sharex=True, sharey=True, squeeze=False)
+    drawn = set()
+    longest = settings.duration_s - result.monitor_from_s
+    for i, speed in enumerate(speeds):
+        sk = speed_key(speed)
+        for j, f in enumerate(faults):
+            ax = axes[i, j]
+            if curve is not None and len(curve):
+                for det in DETECTORS:
+                    rows = curve[(curve["detector"] == det) & (curve["speed_kmh"] == speed)
+                                 & (curve["fault"] == f.name)].sort_values("mtbfa_h")
+                    if not len(rows):
+                        continue
+                    colour, marker = DETECTOR_STYLES[det]
+                    ax.plot(rows["mtbfa_h"], rows["km_delay_median_s"], color=colour, lw=1.0,
+                            marker=marker, ms=2.5, ls=LINE_STYLES.get(det, "-"),
+                            zorder=3 if det in LINE_STYLES else 2)
+                    drawn.add(det)
+            running = [result.metrics.get(f"tail_blocks_{d}_{sk}", 0)
+                       * settings.false_alarm_block_s / 3600.0 for d in DETECTORS]
+            if max(running) > 0:
+                ax.axvspan(1e-3, max(running), color="0.92", zorder=0, lw=0)
+            for target in MTBFA_TARGETS_H:
+                ax.axvline(target, color="0.6", lw=0.8, ls=":")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlim(1e-3, 1e4)
+            ax.set_ylim(0.5 * result.dt_s, longest)
+            if i == 0:
+                ax.set_title(fault_short_label(f, tex=True), fontsize=8)
+            if j == 0:
+                ax.set_ylabel(f"{speed:g} km/h\ndelay (s)", fontsize=8)
+            if i == len(speeds) - 1:
+                ax.set_xlabel("MTBFA (h)", fontsize=8)
+            ax.set_xticks([1e-2, 1, 1e2, 1e4])
+            ax.tick_params(labelsize=7)
+            ax.minorticks_off()
+    handles = [Line2D([], [], color=DETECTOR_STYLES[d][0], marker=DETECTOR_STYLES[d][1], ms=3,
+                      lw=1.0, ls=LINE_STYLES.get(d, "-")) for d in DETECTORS if d in drawn]
+    labels = [DETECTOR_SHORT[d] for d in DETECTORS if d in drawn]
+    handles += [Patch(color="0.92"), Line2D([], [], color="0.6", lw=0.8, ls=":")]
+    labels += ["the calibration records' running (beyond: the tail extrapolated)",
+               "operating points: " + ", ".join(f"{t:g} h" for t in MTBFA_TARGETS_H)]
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=3)
+    return fig
+
+
 def roc_curves(result, settings: Settings):
     """At the first speed, one panel per fault: each detector's rate of detection within 1 s
     against its false alarms per hour on the fault-free records as the threshold varies (log x;
@@ -293,7 +343,7 @@ def roc_curves(result, settings: Settings):
 
 
 def fault_time_posterior(result, settings: Settings):
-    """The illustrated record's exact posterior: (left) P(fault time | the whole record, a fault
+    """The illustrated record's oracle posterior: (left) P(fault time | the whole record, a fault
     happened) over the prior's grid of fault times, with the true fault time marked; (right)
     P(which fault | the record, a fault happened) over the abrupt faults of the Kalman bank,
     the true fault highlighted. Log scales: the posterior is usually sure to many orders of
@@ -346,5 +396,5 @@ def fault_time_posterior(result, settings: Settings):
     return fig
 
 
-__all__ = ["DETECTOR_STYLES", "delay_by_fault", "fault_time_posterior", "record_around_fault",
+__all__ = ["DETECTOR_STYLES", "delay_by_fault", "delay_vs_mtbfa", "fault_time_posterior", "record_around_fault",
            "roc_curves"]

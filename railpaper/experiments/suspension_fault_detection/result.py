@@ -118,15 +118,22 @@ class RecordRun:
         The record ended at flange contact.
     statistics : dict of str to ndarray (K,)
         Each detector's alarm statistic after every sample (dimensionless: the CUSUM's
-        log-likelihood ratio, the RBPF estimate's largest relative departure from nominal, the
-        posterior probability that the fault has happened).
+        log-likelihood ratio, the windowed sum of squared whitened innovations, the GLR's
+        largest log-likelihood ratio, the log of the mixture Shiryaev–Roberts statistic, the
+        oracle's posterior probability that the fault has happened; −inf where a statistic is
+        not yet defined).
     post_fault_estimate : dict of str to float
         Each estimating detector's value of the faulted parameter at the record's end, as a
-        fraction of nominal (``exact``: the posterior mean over the hypotheses that name this
-        parameter; ``rbpf``: its estimate).
+        fraction of nominal (``oracle``: the posterior mean over its hypotheses; ``glr``: the
+        factor of the GLR's best hypothesis if it names this parameter, else 1).
     true_factor_end : float
         The faulted parameter's true value at the record's end, fraction of nominal (1 when
         fault-free).
+    bank_hypothesis : ndarray of int, (K,), optional
+        After every sample, the hypothesis of the GLR's maximum (an index into
+        :func:`~railpaper.experiments.suspension_fault_detection.detectors.bank_hypotheses`;
+        −1 before the first change step): which parameter the detectors that do not know the
+        fault blame.
     """
 
     fault: str
@@ -139,26 +146,21 @@ class RecordRun:
     statistics: dict[str, np.ndarray]
     post_fault_estimate: dict[str, float]
     true_factor_end: float
+    bank_hypothesis: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class IllustratedRecord:
     """The record drawn in the chapter's first figure (fault ``fault``, seed ``seed``, first
-    speed), with what the detectors estimate along it.
+    speed), with the oracle's posterior after it.
 
     Attributes
     ----------
     run : RecordRun
     dt_s : float
         Sample time, s.
-    rbpf_relative : ndarray, (K, 2)
-        The RBPF's estimates of the tracked parameters
-        (:data:`~railpaper.experiments.suspension_fault_detection.spec.TRACKED`), fraction of
-        nominal.
-    true_relative : ndarray, (K, 2)
-        Their true values, fraction of nominal.
     fault_times_s : ndarray, (J,)
-        The grid of fault times of the exact reference, s.
+        The oracle's grid of fault times, s.
     fault_time_posterior : ndarray, (J,)
         P(fault time | all the record, a fault happened).
     value_posterior : dict of str to float
@@ -167,8 +169,6 @@ class IllustratedRecord:
 
     run: RecordRun
     dt_s: float
-    rbpf_relative: np.ndarray
-    true_relative: np.ndarray
     fault_times_s: np.ndarray
     fault_time_posterior: np.ndarray
     value_posterior: dict[str, float]
@@ -197,6 +197,13 @@ class FaultDetectionResult(ChapterResult):
         One row per (detector, speed, fault, threshold): false alarms per hour and the rate of
         detection within 1 s.
     illustrated : IllustratedRecord
+    delay_curve : pandas.DataFrame
+        One row per (detector, speed, fault, mean time between false alarms on a grid, h):
+        the threshold of the detector's fault-free tail model there, the Kaplan–Meier median
+        delay (s; NaN where fewer than half the records are detected) and the probability of
+        detection within 2 s.
+    bank_hypotheses : tuple of (str, float)
+        The hypotheses of ``glr`` and ``bayes`` in their order: (parameter name, factor).
     """
 
     faults: tuple[Fault, ...] = ()
@@ -207,6 +214,8 @@ class FaultDetectionResult(ChapterResult):
     critical_speeds: pd.DataFrame | None = None
     roc: pd.DataFrame | None = None
     illustrated: IllustratedRecord | None = None
+    delay_curve: pd.DataFrame | None = None
+    bank_hypotheses: tuple[tuple[str, float], ...] = ()
 
     def select(self, *, fault: str | None = None, role: str | None = None,
                speed_kmh: float | None = None, detector: str | None = None

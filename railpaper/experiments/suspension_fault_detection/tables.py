@@ -6,7 +6,7 @@ figures share.
 Every function takes the run's :class:`FaultDetectionResult` (and its settings) and returns
 Markdown: numbers to four significant digits, "beyond the record" for a median delay (or an
 interval end) that lies beyond it (``delay_median_reached_<tag>`` False: no number is written),
-"—" where a detector has no metric (the RBPF runs only at the first speed).
+"—" where a detector has no metric (a speed or fault it was not run on).
 """
 
 from __future__ import annotations
@@ -22,19 +22,21 @@ from railpaper.experiments.suspension_fault_detection.result import (
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
+    MTBFA_TARGETS_H,
     WITHIN_S,
     Settings,
 )
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
-DETECTOR_SHORT = {"residual": "residual CUSUM", "chi2": "windowed χ²", "rbpf": "RBPF band",
-                  "exact": "exact posterior"}
+DETECTOR_SHORT = {"cusum": "variance CUSUM", "chi2": "windowed χ²", "glr": "GLR",
+                  "bayes": "Shiryaev–Roberts", "oracle": "oracle"}
 
 #: What each detector's alarm statistic is (its threshold's meaning, dimensionless).
-STATISTICS = {"residual": "CUSUM log-likelihood ratio of the whitened innovations",
+STATISTICS = {"cusum": "CUSUM log-likelihood ratio of the whitened innovations",
               "chi2": "sum of the squared whitened innovations over the window",
-              "rbpf": "largest relative departure of the RBPF estimate from nominal",
-              "exact": "posterior probability that a fault has happened"}
+              "glr": "largest log-likelihood ratio of a change in the window (nats)",
+              "bayes": "log of the mixture Shiryaev–Roberts statistic (nats)",
+              "oracle": "log posterior odds that a fault has happened (nats)"}
 
 #: Model parameters (``lateral_16state.PARAM_NAMES``): plain symbol, mathtext symbol, words.
 PARAMETERS = {"csy": ("C_sy", r"$C_{sy}$", "secondary lateral damping"),
@@ -118,6 +120,23 @@ def faults_table(result) -> str:
         "critical speed after the fault (km/h)"]))
 
 
+def _delay_rows(result, speed_tag: str, suffix: str) -> list[list[str]]:
+    """Per fault, its label and per detector "median [95 %]; within the shortest / longest
+    horizon" of the metrics tagged ``<detector>_<fault>_<speed><suffix>``."""
+    short, long_ = WITHIN_S[0], WITHIN_S[-1]
+    rows = []
+    for f in result.faults:
+        row = [f.label]
+        for det in DETECTORS:
+            tag = f"{det}_{f.name}_{speed_tag}{suffix}"
+            delay = delay_cell(result.metrics, tag)
+            a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
+            b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
+            row.append(delay if a is None or b is None else f"{delay}; {percent(a)} / {percent(b)}")
+        rows.append(row)
+    return rows
+
+
 def detection_table(result, settings: Settings) -> str:
     """One table per speed (the run's order, each under a bold "<speed> km/h" line), one row
     per fault and one column per detector: the median detection delay with its 95 % interval
@@ -136,19 +155,75 @@ def detection_table(result, settings: Settings) -> str:
             records = "" if n is None else f", {number(n)} record{'s' if n != 1 else ''}"
             columns.append(f"{DETECTOR_SHORT[det]}: median delay [95 %] (s{records}); "
                            f"detected within {short:g} s / {long_:g} s")
-        rows = []
-        for f in result.faults:
-            row = [f.label]
-            for det in DETECTORS:
-                tag = f"{det}_{f.name}_{sk}"
-                delay = delay_cell(result.metrics, tag)
-                a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
-                b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
-                row.append(delay if a is None or b is None
-                           else f"{delay}; {percent(a)} / {percent(b)}")
-            rows.append(row)
+        rows = _delay_rows(result, sk, "")
         out.append(f"**{speed:g} km/h**\n\n" + markdown(pd.DataFrame(rows, columns=columns)))
     return "\n".join(out)
+
+
+def operating_point_table(result, settings: Settings, mtbfa_h: float = 100.0) -> str:
+    """One table per speed at one mean time between false alarms (h; a value of
+    :data:`MTBFA_TARGETS_H`): per fault (rows) and detector (columns), the median detection
+    delay with its 95 % interval over records (s; "beyond the record" where fewer than half
+    are detected after the fault) and the share detected within 0.5 s and 2 s, at the
+    detector's threshold for that mean time (its fault-free tail model)."""
+    out = []
+    for speed in settings.speeds_kmh:
+        sk = speed_key(speed)
+        columns = ["fault"] + [f"{DETECTOR_SHORT[det]}: median delay [95 %] (s); within "
+                               f"{WITHIN_S[0]:g} s / {WITHIN_S[-1]:g} s" for det in DETECTORS]
+        rows = _delay_rows(result, sk, f"_at_{mtbfa_h:g}h")
+        out.append(f"**{speed:g} km/h, thresholds for {mtbfa_h:g} h between false alarms**\n\n"
+                   + markdown(pd.DataFrame(rows, columns=columns)))
+    return "\n".join(out)
+
+
+def tail_table(result, settings: Settings) -> str:
+    """Per speed and detector: the exponential tail of its fault-free block maxima (level,
+    scale, the share of blocks above the level, blocks), the check against the evaluation
+    records (the mean time between false alarms checked, alarms expected and counted, the
+    Poisson p-value), and its thresholds for :data:`MTBFA_TARGETS_H` (for ``bayes`` with the
+    Shiryaev–Roberts lower bound on the mean time at each)."""
+    rows = []
+    m = result.metrics
+    for speed in settings.speeds_kmh:
+        sk = speed_key(speed)
+        for det in DETECTORS:
+            tag = f"{det}_{sk}"
+            if f"tail_level_{tag}" not in m:
+                continue
+            check = NONE
+            if f"tail_check_alarms_{tag}" in m:
+                check = (f"{number(m[f'tail_check_mtbfa_h_{tag}'])} h: "
+                         f"{number(m[f'tail_check_expected_{tag}'])} expected, "
+                         f"{m[f'tail_check_alarms_{tag}']} counted "
+                         f"(p = {number(m[f'tail_check_p_{tag}'], 2)})")
+            thresholds = []
+            for target in MTBFA_TARGETS_H:
+                text = number(m[f"threshold_at_{target:g}h_{tag}"])
+                bound = m.get(f"sr_bound_mtbfa_h_at_{target:g}h_{tag}")
+                if bound is not None:
+                    text += f" (≥ {number(bound, 2)} h)"
+                thresholds.append(text)
+            rows.append((number(speed), DETECTOR_SHORT[det], number(m[f"tail_level_{tag}"]),
+                         number(m[f"tail_scale_{tag}"]), percent(m[f"tail_exceed_{tag}"]),
+                         number(m[f"tail_blocks_{tag}"]), check, *thresholds))
+    return markdown(pd.DataFrame(rows, columns=[
+        "speed (km/h)", "detector", "tail from", "tail scale", "blocks above", "blocks",
+        "check on the evaluation records"] + [f"threshold for {t:g} h" for t in MTBFA_TARGETS_H]))
+
+
+def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
+    """"GLR and Shiryaev–Roberts at 200 km/h": the detectors and speeds whose tail model the
+    evaluation records refute (two-sided Poisson p-value of its check below ``level``), or
+    "no detector" when there is none."""
+    parts = []
+    for speed in speeds_kmh:
+        failed = [DETECTOR_SHORT[d] for d in DETECTORS
+                  if metrics.get(f"tail_check_p_{d}_{speed_key(speed)}", 1.0) < level]
+        if failed:
+            names = failed[0] if len(failed) == 1 else ", ".join(failed[:-1]) + " and " + failed[-1]
+            parts.append(f"{names} at {speed:g} km/h")
+    return "; ".join(parts) if parts else "no detector"
 
 
 def false_alarm_table(result, settings: Settings) -> str:
@@ -173,11 +248,14 @@ def false_alarm_table(result, settings: Settings) -> str:
 
 
 def estimate_table(result, settings: Settings) -> str:
-    """Per speed and fault, each estimating detector's median |post-fault estimate − truth| of
-    the faulted parameter at the record's end (fraction of nominal) with its 95 % interval and
-    the number of records ("—": not estimated — the RBPF runs at the first speed only, tracks
-    K_sy and C_saly only, and needs two records)."""
-    estimators = [d for d in ("exact", "rbpf") if d in DETECTORS]
+    """Per speed and fault: the median |post-fault estimate − truth| of the faulted parameter at
+    the record's end (fraction of nominal) with its 95 % interval and the number of records, of
+    the oracle (its posterior mean) and of the GLR's best hypothesis (its factor when it names
+    the faulted parameter, else 1); then the share of records alarmed after the fault whose
+    GLR's best hypothesis at the alarm of ``glr`` and of ``bayes`` names the faulted parameter,
+    with its 95 % interval and count ("—": none alarmed)."""
+    estimators = [d for d in ("oracle", "glr") if d in DETECTORS]
+    blamers = [d for d in ("glr", "bayes") if d in DETECTORS]
     rows = []
     for speed in settings.speeds_kmh:
         sk = speed_key(speed)
@@ -189,10 +267,17 @@ def estimate_table(result, settings: Settings) -> str:
                 if key + "_n" in result.metrics:
                     text += f" (n = {number(result.metrics[key + '_n'])})"
                 row.append(text)
+            for det in blamers:
+                key = f"isolated_{det}_{f.name}_{sk}"
+                text = interval_text(result.metrics, key, percent)
+                if key + "_n" in result.metrics:
+                    text += f" (n = {number(result.metrics[key + '_n'])})"
+                row.append(text)
             rows.append(row)
     return markdown(pd.DataFrame(rows, columns=["speed (km/h)", "fault"] + [
         f"{DETECTOR_SHORT[d]}: median abs. error [95 %] (fraction of nominal)"
-        for d in estimators]))
+        for d in estimators] + [f"{DETECTOR_SHORT[d]} alarms blamed on the right parameter "
+                                "[95 %]" for d in blamers]))
 
 
 def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
@@ -212,4 +297,5 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
 
 __all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "clean", "delay_cell", "delay_text",
            "detection_table", "estimate_table", "false_alarm_table", "fault_free_flange_text",
-           "fault_short_label", "faults_table", "interval_text", "percent"]
+           "fault_short_label", "faults_table", "interval_text", "operating_point_table",
+           "percent", "tail_check_failures", "tail_table"]

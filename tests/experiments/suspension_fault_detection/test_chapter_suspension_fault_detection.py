@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from railpaper.pipeline.check import check_chapter
-from railpaper.pipeline.findings import read_findings
+from railpaper.pipeline.findings import in_force
 
 CHAPTER = "suspension-fault-detection"
 pytestmark = pytest.mark.slow
@@ -17,17 +17,18 @@ pytestmark = pytest.mark.slow
 def test_outputs_complete(quick_chapter_dir):
     out = quick_chapter_dir(CHAPTER)
     metrics = json.loads((out / "metrics.json").read_text())["metrics"]
-    for det in ("residual", "exact", "rbpf"):
+    for det in ("cusum", "chi2", "glr", "bayes", "oracle"):
         assert f"false_alarms_per_hour_{det}_300kmh" in metrics
         assert f"delay_median_reached_{det}_csaly_0_300kmh" in metrics
-    assert "false_alarms_per_hour_rbpf_200kmh" not in metrics          # RBPF: first speed only
     assert not [k for k, v in metrics.items()                          # no number for "never"
                 if k.startswith(("delay_median_s_", "flange_contact_after_s_")) and v < 0]
-    for row in read_findings(CHAPTER).values():
+    for row in in_force(CHAPTER).values():
         assert {row["metric"], row["n_samples"], *row["interval"]} <= set(metrics)
     ts = pd.read_csv(out / "timeseries.csv")
-    assert {"t_s", "statistic_exact", "statistic_residual", "rbpf_csaly_relative"} <= set(ts)
-    for fig in ("record_around_fault", "fault_time_posterior", "delay_by_fault", "roc_curves"):
+    assert {"t_s", "statistic_oracle", "statistic_cusum", "statistic_bayes", "statistic_glr",
+            "glr_hypothesis"} <= set(ts)
+    for fig in ("record_around_fault", "fault_time_posterior", "delay_by_fault", "roc_curves",
+                "delay_vs_mtbfa"):
         assert (out / f"{fig}.png").stat().st_size > 10_000
 
 
@@ -48,5 +49,5 @@ def test_page_opens_with_the_findings(quick_chapter_dir):
     shown = glued[0]["data"]["application/papermill.record/text/markdown"]
     shown = shown if isinstance(shown, str) else "".join(shown)
     assert shown.startswith("| finding |")                            # header, then one row each
-    assert shown.count("\n| ") == len(read_findings(CHAPTER))
+    assert shown.count("\n| ") == len(in_force(CHAPTER))
 

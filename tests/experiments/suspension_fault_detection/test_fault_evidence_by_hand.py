@@ -88,3 +88,61 @@ def test_a_median_beyond_the_record_is_a_field_not_a_number():
     assert beyond == {"d_reached_y": False, "d_high_bounded_y": False, "d_s_y_low": 0.2}
     assert read_censored_median({}, "delay_median", "x") is None
     assert censored_median([0.3, 0.2, 0.1, 0.4, 0.5]).metrics("d", "z")["d_s_z"] == 0.3
+
+
+def _free_run(statistic, seed=0, detector="bayes"):
+    import numpy as np
+
+    from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, RecordRun
+    return RecordRun(NO_FAULT, "calibration", 300.0, seed, -1.0, 0.5 * len(statistic), False,
+                     {detector: np.asarray(statistic, float)}, {}, 1.0)
+
+
+def test_which_parameter_is_blamed_at_the_alarm_by_hand():
+    """Three records of a C_saly fault (parameter 4), rows of 0.5 s: the first alarms at
+    1.5 s (row 2), where the GLR's best hypothesis is 9 (parameter 9 // 5 = 1: wrong); the
+    second at 1.0 s (row 1), hypothesis 22 (parameter 4: right); the third never: 1 of 2."""
+    import numpy as np
+    import pandas as pd
+
+    from railpaper.experiments.suspension_fault_detection.evidence import isolation_metrics
+    from railpaper.experiments.suspension_fault_detection.result import RecordRun
+
+    runs = [RecordRun("csaly_0", "fault", 300.0, s, 0.5, 2.0, False, {}, {}, 0.0,
+                      np.array(hyp)) for s, hyp in enumerate([[0, 3, 9, 9], [0, 22, 22, 1],
+                                                              [0, 0, 0, 0]])]
+    outcomes = pd.DataFrame({"alarm_s": [1.5, 1.0, np.inf], "delay_s": [1.0, 0.5, np.inf]})
+    parameter_of = np.repeat(np.arange(5), 5)                    # 5 parameters x 5 factors
+    m = isolation_metrics(runs, outcomes, 0.5, parameter_of, 4, "x")
+    assert (m["isolated_x"], m["isolated_x_n"]) == (0.5, 2)
+
+
+def test_tail_check_and_operating_points_by_hand():
+    """Calibration: one record whose 0.5 s blocks (one sample each) have maxima 1..10, the
+    tail of the monitoring's hand test (level 8, scale 1.5, 2 of 10 above: a mean time of
+    2.5 s at the level). Check record: 25 blocks (12.5 s), 5 of them at 100 (above any
+    threshold), the rest 0: the threshold for 5 expected exceedances is the level itself
+    (12.5 s / 5 = 2.5 s), 5 are counted (two-sided Poisson p = 1). At 100 h the
+    tail's threshold is 8 + 1.5 ln(0.2 * 100 * 3600 / 0.5), and the Shiryaev-Roberts bound at it
+    is e^h * dt."""
+    import math
+
+    import numpy as np
+
+    from railpaper.experiments.suspension_fault_detection.evidence import (
+        false_alarm_tail,
+        operating_point_metrics,
+        tail_check,
+    )
+    tail = false_alarm_tail([_free_run(np.arange(1.0, 11.0))], "bayes", 0, 1, 0.5)
+    assert (tail.level, tail.scale, tail.exceed, tail.blocks) == (8.0, 1.5, 0.2, 10)
+    check = tail_check(tail, [_free_run(np.r_[np.full(5, 100.0), np.zeros(20)])], "bayes", 0, 1,
+                       "x")
+    assert check["tail_check_mtbfa_h_x"] * 3600 == pytest.approx(2.5)
+    assert check["tail_check_expected_x"] == pytest.approx(5.0)
+    assert check["tail_check_alarms_x"] == 5
+    assert check["tail_check_p_x"] == 1.0
+    m = operating_point_metrics(tail, {}, "bayes", 0, 0.5, "300kmh")
+    h = 8.0 + 1.5 * math.log(0.2 * 100 * 3600 / 0.5)
+    assert m["threshold_at_100h_bayes_300kmh"] == pytest.approx(h)
+    assert m["sr_bound_mtbfa_h_at_100h_bayes_300kmh"] == pytest.approx(math.exp(h) * 0.5 / 3600)
