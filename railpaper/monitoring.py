@@ -155,11 +155,13 @@ class ExponentialTail:
     block_s: float
 
     def mtbfa_h(self, threshold: float) -> float:
-        """Mean time between false alarms at ``threshold`` (≥ ``level``), hours."""
+        """Mean time between false alarms at ``threshold`` (≥ ``level``), hours (inf beyond
+        e^700: a tail so steep that the threshold is never reached)."""
         if threshold < self.level:
             raise ValueError(f"threshold {threshold:g} lies below the tail ({self.level:g})")
-        p = self.exceed * math.exp(-(threshold - self.level) / self.scale)
-        return self.block_s / p / SECONDS_PER_HOUR
+        log_h = (math.log(self.block_s / self.exceed / SECONDS_PER_HOUR)
+                 + (threshold - self.level) / self.scale)
+        return math.exp(log_h) if log_h < 700.0 else math.inf
 
     def threshold(self, mtbfa_h: float) -> float:
         """The threshold whose mean time between false alarms is ``mtbfa_h`` hours (at least

@@ -122,6 +122,7 @@ def test_exponential_tail_by_hand():
     assert tail.threshold(5.0 / 3600) == pytest.approx(8.0 + 1.5 * math.log(2.0))
     with pytest.raises(ValueError, match="below the tail"):
         tail.mtbfa_h(7.0)
+    assert tail.mtbfa_h(8.0 + 1.5 * 800) == math.inf             # e^800: never, not an error
     with pytest.raises(ValueError, match="at least 3"):
         fit_exponential_tail([1.0, 2.0], 0.5)
 

@@ -9,8 +9,9 @@ Definitions (times in s from the record's start):
   end; an alarm is the first sample in it whose statistic reaches the threshold;
 * *threshold*: each detector's, per speed, is set on the calibration records (fault-free) so
   that at most a fraction ``false_alarm_probability`` of them alarm in their window;
-* *false alarms per hour*: the evaluation records' (other fault-free records) alarm rate per
-  window, times 3600 / window length — the rate of rare, independent alarms;
+* *false alarms per hour*: the evaluation records (other fault-free records) alarmed in their
+  window, over the hours they were watched (each to its real end) — the rate of rare,
+  independent alarms, with the exact Poisson interval of the count;
 * *delay*: alarm time − fault time for a record without an alarm before its fault; a record
   that is never alarmed (or cut at flange contact first) has an infinite delay, so the median
   is beyond the record where fewer than half the records are alarmed (then no number is
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+from scipy.stats import chi2 as poisson_distribution_chi2
 from scipy.stats import poisson as poisson_distribution
 
 from railpaper.engine import first_alarm
@@ -119,16 +121,26 @@ def detector_outcomes(runs: list[RecordRun], detector: str, h: float, first_row:
     return pd.DataFrame(rows)
 
 
+def watched_h(runs: list[RecordRun], first_row: int, dt_s: float) -> float:
+    """Fault-free running watched in the monitoring windows of ``runs``, hours: each record from
+    the window's start to its real end (records cut at flange contact are shorter)."""
+    return sum(max(0, int(round(r.end_s / dt_s)) - first_row) for r in runs) * dt_s / 3600.0
+
+
 def false_alarm_metrics(runs: list[RecordRun], detector: str, h: float, first_row: int,
-                        window_s: float, tag: str) -> dict:
-    """False alarms per hour on the evaluation records, with the Clopper–Pearson interval."""
+                        dt_s: float, tag: str) -> dict:
+    """False alarms per hour on the evaluation records: the records alarmed in their window
+    (at most one each) over the hours watched (:func:`watched_h`), with the exact Poisson
+    (Garwood) 95 % interval of the count; ``_n``: the records."""
     maxima = np.array([window_max(r.statistics[detector], first_row) for r in runs])
-    est = rate(maxima >= h)
-    per_hour = 3600.0 / window_s
-    return {f"false_alarms_per_hour_{tag}": est.value * per_hour,
-            f"false_alarms_per_hour_{tag}_low": est.low * per_hour,
-            f"false_alarms_per_hour_{tag}_high": est.high * per_hour,
-            f"false_alarms_per_hour_{tag}_n": est.n}
+    alarms = int(np.sum(maxima >= h))
+    hours = watched_h(runs, first_row, dt_s)
+    low = poisson_distribution_chi2.ppf(0.025, 2 * alarms) / 2.0 if alarms else 0.0
+    high = poisson_distribution_chi2.ppf(0.975, 2 * (alarms + 1)) / 2.0
+    return {f"false_alarms_per_hour_{tag}": alarms / hours,
+            f"false_alarms_per_hour_{tag}_low": low / hours,
+            f"false_alarms_per_hour_{tag}_high": high / hours,
+            f"false_alarms_per_hour_{tag}_n": len(runs)}
 
 
 def cusum_false_alarms(paths, h: float, first_row: int, dt_s: float) -> tuple[int, float]:
@@ -227,11 +239,13 @@ def fault_free_flange_metrics(runs: list[RecordRun], tag: str) -> dict:
 
 
 def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
-             outcomes_of, detector: str, first_row: int, window_s: float) -> list[dict]:
+             outcomes_of, detector: str, first_row: int, dt_s: float) -> list[dict]:
     """ROC points of one detector and speed: per fault, false alarms per hour on all the
-    fault-free records against detection within 1 s, over thresholds spanning the maxima."""
+    fault-free records (records alarmed over the hours watched) against detection within 1 s,
+    over thresholds spanning the maxima."""
     free = np.array([window_max(r.statistics[detector], first_row)
                      for r in calibration + evaluation])
+    hours = watched_h(calibration + evaluation, first_row, dt_s)
     rows = []
     for fault, outcomes in outcomes_of.items():
         pre, post = outcomes["pre_max"].to_numpy(), outcomes["post_max_1s"].to_numpy()
@@ -241,7 +255,7 @@ def roc_rows(calibration: list[RecordRun], evaluation: list[RecordRun],
             levels = np.quantile(levels, np.linspace(0, 1, ROC_POINTS))
         for h in np.concatenate([levels, [np.inf]]):
             rows.append({"detector": detector, "fault": fault, "threshold": h,
-                         "false_alarms_per_hour": float(np.mean(free >= h)) * 3600 / window_s,
+                         "false_alarms_per_hour": float(np.sum(free >= h)) / hours,
                          "detected_within_1s": float(np.mean((pre < h) & (post >= h)))})
     return rows
 
@@ -273,6 +287,49 @@ def false_alarm_tail(runs: list[RecordRun], detector: str, first_row: int, block
         return fit_exponential_tail(maxima, block_rows * dt_s)
     except ValueError:
         return None
+
+
+#: Bootstrap resamples (over calibration records) of each detector's false-alarm tail.
+TAIL_RESAMPLES = 200
+
+
+def tail_intervals(runs: list[RecordRun], detector: str, first_row: int, block_rows: int,
+                   dt_s: float, tail: ExponentialTail, rng: np.random.Generator,
+                   tag: str) -> dict:
+    """How far the tail model's operating points can be trusted, by resampling the calibration
+    records with replacement (:data:`TAIL_RESAMPLES` times; the blocks of one record share its
+    track, so records, not blocks, are the independent units): for each mean time T of
+    :data:`MTBFA_TARGETS_H`, the 2.5 and 97.5 % points of the resampled tails' thresholds for T
+    (``threshold_at_<T>h_<tag>_low``/``_high``) and of the mean time they give at the point
+    threshold (``mtbfa_h_at_<T>h_<tag>_low``/``_high``, h; ``…_high_bounded`` False, and no
+    ``_high``, where a resampled tail never reaches the threshold))."""
+    per_record = [block_maxima(r.statistics[detector], first_row, block_rows) for r in runs]
+    points = {t: tail.threshold(t) for t in MTBFA_TARGETS_H}
+    thresholds = {t: [] for t in MTBFA_TARGETS_H}
+    mtbfa = {t: [] for t in MTBFA_TARGETS_H}
+    for _ in range(TAIL_RESAMPLES):
+        pick = rng.integers(len(per_record), size=len(per_record))
+        try:
+            again = fit_exponential_tail(np.concatenate([per_record[i] for i in pick]),
+                                         block_rows * dt_s)
+        except ValueError:                        # a resample without spread: no tail
+            continue
+        for t in MTBFA_TARGETS_H:
+            thresholds[t].append(again.threshold(max(t, again.mtbfa_h(again.level))))
+            mtbfa[t].append(again.mtbfa_h(points[t]) if points[t] >= again.level
+                            else again.mtbfa_h(again.level))
+    m = {}
+    for t in MTBFA_TARGETS_H:
+        if len(thresholds[t]) < TAIL_RESAMPLES // 2:
+            continue
+        low, high = np.quantile(thresholds[t], [0.025, 0.975])
+        m[f"threshold_at_{t:g}h_{tag}_low"], m[f"threshold_at_{t:g}h_{tag}_high"] = low, high
+        low, high = np.quantile(mtbfa[t], [0.025, 0.975], method="inverted_cdf")
+        m[f"mtbfa_h_at_{t:g}h_{tag}_low"] = float(low)
+        m[f"mtbfa_h_at_{t:g}h_{tag}_high_bounded"] = bool(np.isfinite(high))
+        if np.isfinite(high):
+            m[f"mtbfa_h_at_{t:g}h_{tag}_high"] = float(high)
+    return m
 
 
 def tail_check(tail: ExponentialTail, runs: list[RecordRun], detector: str, first_row: int,
@@ -360,7 +417,6 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     there; the fourth value returned is the delay against mean time between false alarms
     table (:func:`delay_curve_rows`)."""
     first_row = window_rows(dt_s, monitor_from_s)
-    window_s = settings.duration_s - monitor_from_s
     block_rows = max(1, int(round(settings.false_alarm_block_s / dt_s)))
     metrics, thresholds, roc, curve = {}, {}, [], []
     for speed in speeds:
@@ -382,8 +438,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
             thresholds[(detector, speed)] = h
             tag = f"{detector}_{speed_key(speed)}"
             metrics[f"threshold_{tag}"] = h
-            metrics.update(false_alarm_metrics(evaluation, detector, h, first_row, window_s,
-                                               tag))
+            metrics.update(false_alarm_metrics(evaluation, detector, h, first_row, dt_s, tag))
             if detector == "cusum":            # a CUSUM: restarts recoverable from its path
                 metrics.update(mean_time_between_false_alarms_metrics(*cusum_false_alarms(
                     [r.statistics[detector] for r in evaluation], h, first_row, dt_s), tag))
@@ -402,7 +457,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
                                                      hypothesis_parameter,
                                                      fault_parameter[fault], ftag))
             for row in roc_rows(calibration, evaluation, outcomes_of, detector, first_row,
-                                window_s):
+                                dt_s):
                 roc.append(dict(row, speed_kmh=speed))
             tail = false_alarm_tail(calibration, detector, first_row, block_rows, dt_s)
             if tail is None:
@@ -410,6 +465,10 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
             metrics.update({f"tail_level_{tag}": tail.level, f"tail_scale_{tag}": tail.scale,
                             f"tail_exceed_{tag}": tail.exceed, f"tail_blocks_{tag}": tail.blocks})
             metrics.update(tail_check(tail, evaluation, detector, first_row, block_rows, tag))
+            rng = np.random.default_rng([settings.seed, 39, speeds.index(speed),
+                                         detectors.index(detector)])
+            metrics.update(tail_intervals(calibration, detector, first_row, block_rows, dt_s,
+                                          tail, rng, tag))
             runs_of = {f: [r for r in have if r.fault == f] for f in faults}
             runs_of = {f: runs for f, runs in runs_of.items() if runs}
             metrics.update(operating_point_metrics(tail, runs_of, detector, first_row, dt_s,
@@ -419,6 +478,6 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
-__all__ = ["censored_median", "delay_curve_rows", "evidence", "false_alarm_tail",
-           "isolation_metrics", "operating_point_metrics", "tail_check", "threshold",
-           "window_rows"]
+__all__ = ["TAIL_RESAMPLES", "censored_median", "delay_curve_rows", "evidence",
+           "false_alarm_tail", "isolation_metrics", "operating_point_metrics", "tail_check",
+           "tail_intervals", "threshold", "watched_h", "window_rows"]

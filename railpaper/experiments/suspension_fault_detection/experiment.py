@@ -30,15 +30,27 @@ import pandas as pd
 from railpaper.experiments.base import ParameterError, check_sample_time, default_progress
 from railpaper.experiments.lateral_vehicle import filter_system, vehicle
 from railpaper.experiments.suspension_fault_detection import detectors, faults, records
-from railpaper.experiments.suspension_fault_detection.evidence import evidence, window_rows
+from railpaper.experiments.suspension_fault_detection.evidence import (
+    detector_outcomes,
+    evidence,
+    false_alarm_metrics,
+    fault_metrics,
+    window_rows,
+)
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
     Fault,
     FaultDetectionResult,
     IllustratedRecord,
     RecordRun,
+    speed_key,
 )
-from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, Settings
+from railpaper.experiments.suspension_fault_detection.spec import (
+    DETECTORS,
+    LADDER,
+    LADDER_MTBFA_H,
+    Settings,
+)
 from railpaper.models import lateral_16state
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
@@ -98,6 +110,11 @@ def validate(settings: Settings) -> None:
         raise ParameterError("parameter 'false_alarm_probability' must be < 1")
     if not settings.cusum_variance_ratio > 1:
         raise ParameterError("parameter 'cusum_variance_ratio' must be > 1 (a growth)")
+    if settings.ladder_records_per_fault >= 2 and settings.ladder_fault_free_records >= 4 \
+            and settings.ladder_speed_kmh not in settings.speeds_kmh:
+        speeds = ", ".join(f"{v:g}" for v in settings.speeds_kmh)
+        raise ParameterError(f"parameter 'ladder_speed_kmh' = {settings.ladder_speed_kmh:g} "
+                             f"km/h is not one of speeds_kmh ({speeds})")
     if window_steps(settings) < 1:
         raise ParameterError(f"parameter 'bank_window_s' = {settings.bank_window_s:g} s is "
                              f"shorter than one sample ({settings.dt_s:g} s)")
@@ -193,6 +210,96 @@ def illustration(run: RecordRun, extra: dict, names: list[str], grid_s, dt_s
                                                                  oracle.value_posterior))))
 
 
+#: Metrics of a ladder rung's evidence kept (with the prefix ``ladder_<rung>_``): at the
+#: ladder's operating point, detection within the shortest and longest horizon, the
+#: Kaplan–Meier median delay, and the tail's threshold and check.
+LADDER_KEPT = ("detected_within_0.5s_", "detected_within_2s_", "km_delay_median_s_",
+               "km_delay_median_reached_", "threshold_at_", "mtbfa_h_at_", "tail_check_p_")
+
+
+def _ladder_items(settings: Settings, chosen: list[Fault]) -> list[tuple[str, str, int]]:
+    """The records of every rung: the first ``ladder_records_per_fault`` of each fault and the
+    first half of ``ladder_fault_free_records`` of each fault-free role (the same seeds as the
+    run's, so the rungs are paired record by record)."""
+    rung = settings.replace(records_per_fault=settings.ladder_records_per_fault,
+                            fault_free_records=settings.ladder_fault_free_records)
+    return plan(rung, chosen)
+
+
+def _kept(metrics: dict, prefix: str) -> dict:
+    point = f"_at_{LADDER_MTBFA_H:g}h"
+    return {prefix + k: v for k, v in metrics.items()
+            if k.startswith(LADDER_KEPT) and (point in k or k.startswith("tail_check_p_"))}
+
+
+def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
+           chosen: list[Fault], values: np.ndarray, bank, ideal: list[RecordRun],
+           progress) -> tuple[dict, pd.DataFrame]:
+    """The realism ladder (:data:`LADDER`) at ``ladder_speed_kmh``: the same seeds' records
+    with fewer or noisier sensors, every detector's thresholds recalibrated on each rung's own
+    fault-free records (and its tail model for :data:`LADDER_MTBFA_H` hours); the ideal rung is
+    the run's own records of those seeds, recalibrated the same way.  Also each rung's records
+    at the ideal rung's thresholds for :data:`LADDER_MTBFA_H` hours (``…_ideal_thresholds_``):
+    what a monitor tuned on the ideal sensors does with the worse ones.  Metrics
+    ``ladder_<rung>_<metric>`` (:data:`LADDER_KEPT`) and one row per (rung, detector, fault)."""
+    if settings.ladder_records_per_fault < 2 or settings.ladder_fault_free_records < 4:
+        return {}, pd.DataFrame()
+    speed = settings.ladder_speed_kmh
+    items = _ladder_items(settings, chosen)
+    by_name = {f.name: f for f in chosen}
+    fault_parameter = {f.name: lateral_16state.PARAM_NAMES.index(f.parameter) for f in chosen}
+    grid_s = faults.fault_times_s(fault_settings)
+    wanted = {(fault, role, seed) for fault, role, seed in items}
+    rungs = {"ideal": [r for r in ideal if r.speed_kmh == speed
+                       and (r.fault, r.role, r.seed) in wanted]}
+    for n, (rung, (_, overrides)) in enumerate(LADDER.items()):
+        worse = settings.replace(**overrides)
+        rungs[rung] = []
+        for i, (fault_name, role, seed) in enumerate(items):
+            progress((n * len(items) + i) / (len(LADDER) * len(items)),
+                     f"ladder {rung}, {fault_name}, seed {seed}")
+            run_, _ = run_record(worse, fault_settings, fixed, theta, by_name.get(fault_name),
+                                 role, speed, seed, values, bank)
+            rungs[rung].append(run_)
+    monitor_from = float(grid_s[0])
+    sk = speed_key(speed)
+    metrics, rows, ideal_thresholds = {}, [], {}
+    for rung, records_ in rungs.items():
+        m, _, _, _ = evidence(records_, list(DETECTORS), (speed,), [f.name for f in chosen],
+                              settings, settings.dt_s, monitor_from, bank.parameter,
+                              fault_parameter)
+        metrics.update(_kept(m, f"ladder_{rung}_"))
+        if rung == "ideal":
+            ideal_thresholds = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}")
+                                for d in DETECTORS}
+        first_row = window_rows(settings.dt_s, monitor_from)
+        for det in DETECTORS:
+            h_ideal = ideal_thresholds.get(det)
+            free = [r for r in records_ if r.role == "evaluation"]
+            if rung != "ideal" and h_ideal is not None and free:
+                fa = false_alarm_metrics(free, det, h_ideal, first_row, settings.dt_s,
+                                         f"{det}_{sk}")
+                metrics.update({f"ladder_{rung}_ideal_thresholds_{k}": v for k, v in fa.items()})
+            for f in chosen:
+                tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
+                row = {"rung": rung, "detector": det, "fault": f.name,
+                       "km_delay_median_s": m.get(f"km_delay_median_s_{tag}", np.nan),
+                       "detected_within_0.5s": m.get(f"detected_within_0.5s_{tag}", np.nan),
+                       "detected_within_2s": m.get(f"detected_within_2s_{tag}", np.nan),
+                       "detected_within_2s_at_ideal_thresholds": np.nan}
+                runs_ = [r for r in records_ if r.fault == f.name]
+                if rung != "ideal" and h_ideal is not None and runs_:
+                    outcomes = detector_outcomes(runs_, det, h_ideal, first_row, settings.dt_s)
+                    at_ideal = fault_metrics(outcomes, tag)
+                    metrics.update({f"ladder_{rung}_ideal_thresholds_{k}": v
+                                    for k, v in at_ideal.items()
+                                    if k.startswith("detected_within_2s_")})
+                    row["detected_within_2s_at_ideal_thresholds"] = \
+                        at_ideal[f"detected_within_2s_{tag}"]
+                rows.append(row)
+    return metrics, pd.DataFrame(rows)
+
+
 def run(settings: Settings, *, progress=None) -> FaultDetectionResult:
     """Run the appendix with ``settings`` (of :data:`SPEC`; a quick run's sizes are already in
     them).  Everything runs on one numba and one OpenBLAS thread
@@ -236,6 +343,9 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
                                         monitor_from, bank.parameter,
                                         {f.name: lateral_16state.PARAM_NAMES.index(f.parameter)
                                          for f in chosen})
+    ladder_metrics, ladder_rows = ladder(settings, fault_settings, fixed, theta, chosen, values,
+                                         bank, records_, progress)
+    metrics.update(ladder_metrics)
     critical = faults.critical_speeds(fixed, theta, chosen)
     for row in critical.itertuples():
         metrics[f"critical_speed_kmh_{row.fault}"] = row.critical_speed_kmh
@@ -247,7 +357,7 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
                                 records=tuple(records_), thresholds=thresholds,
                                 dt_s=settings.dt_s, monitor_from_s=monitor_from,
                                 critical_speeds=critical, roc=roc, illustrated=illustrated,
-                                delay_curve=delay_curve,
+                                delay_curve=delay_curve, ladder=ladder_rows,
                                 bank_hypotheses=tuple(
                                     (lateral_16state.PARAM_NAMES[j], float(f))
                                     for j, f in zip(bank.parameter, bank.factor)))
@@ -264,4 +374,5 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
     return out
 
 
-__all__ = ["chosen_faults", "plan", "run", "run_record", "validate"]
+__all__ = ["LADDER_KEPT", "chosen_faults", "ladder", "plan", "run", "run_record", "validate",
+           "window_steps"]

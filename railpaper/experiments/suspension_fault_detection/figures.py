@@ -22,6 +22,8 @@ from railpaper.experiments.suspension_fault_detection.result import (
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
+    LADDER,
+    LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
     Settings,
 )
@@ -272,6 +274,59 @@ def delay_vs_mtbfa(result, settings: Settings):
     return fig
 
 
+def ladder_figure(result, settings: Settings):
+    """The realism ladder at ``ladder_speed_kmh`` and thresholds for :data:`LADDER_MTBFA_H`
+    hours between false alarms (recalibrated on each rung): per fault (columns), each
+    detector's Kaplan–Meier median delay (top, log; missing where fewer than half the records
+    are detected) and its share detected within 2 s (bottom; dotted: at the ideal rung's
+    thresholds) on each rung (x)."""
+    table = result.ladder
+    faults = list(result.faults)
+    fig, axes = plt.subplots(2, len(faults), figsize=(7, 4.6), sharex=True, sharey="row",
+                             squeeze=False)
+    rungs = ["ideal"] + list(LADDER)
+    x = np.arange(len(rungs))
+    drawn = set()
+    for j, f in enumerate(faults):
+        top, bottom = axes[0, j], axes[1, j]
+        for det in DETECTORS:
+            rows = table[(table["detector"] == det) & (table["fault"] == f.name)] \
+                if table is not None and len(table) else None
+            if rows is None or not len(rows):
+                continue
+            rows = rows.set_index("rung").reindex(rungs)
+            colour, marker = DETECTOR_STYLES[det]
+            ls = LINE_STYLES.get(det, "-")
+            top.plot(x, rows["km_delay_median_s"], color=colour, marker=marker, ms=3, lw=1.0,
+                     ls=ls)
+            bottom.plot(x, 100 * rows["detected_within_2s"], color=colour, marker=marker, ms=3,
+                        lw=1.0, ls=ls)
+            bottom.plot(x, 100 * rows["detected_within_2s_at_ideal_thresholds"], color=colour,
+                        lw=1.0, ls=":")
+            drawn.add(det)
+        top.set_title(fault_short_label(f, tex=True), fontsize=8)
+        top.set_yscale("log")
+        top.set_ylim(0.5 * result.dt_s, settings.duration_s)
+        bottom.set_ylim(-5, 105)
+        bottom.set_xticks(x)
+        bottom.set_xticklabels(["ideal", "no axle-box,\ngyro 0.01", "accel.\nonly"],
+                               fontsize=7, rotation=30)
+        for ax in (top, bottom):
+            ax.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("median delay (s)", fontsize=8)
+    axes[1, 0].set_ylabel("detected within 2 s (%)", fontsize=8)
+    handles = [Line2D([], [], color=DETECTOR_STYLES[d][0], marker=DETECTOR_STYLES[d][1], ms=3,
+                      lw=1.0, ls=LINE_STYLES.get(d, "-")) for d in DETECTORS if d in drawn]
+    labels = [DETECTOR_SHORT[d] for d in DETECTORS if d in drawn]
+    handles.append(Line2D([], [], color="k", lw=1.0, ls=":"))
+    labels.append("at the ideal rung's thresholds")
+    fig.suptitle(f"{settings.ladder_speed_kmh:g} km/h, thresholds for {LADDER_MTBFA_H:g} h "
+                 "between false alarms on each rung", fontsize=9)
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=3)
+    return fig
+
+
 def roc_curves(result, settings: Settings):
     """At the first speed, one panel per fault: each detector's rate of detection within 1 s
     against its false alarms per hour on the fault-free records as the threshold varies (log x;
@@ -396,5 +451,6 @@ def fault_time_posterior(result, settings: Settings):
     return fig
 
 
-__all__ = ["DETECTOR_STYLES", "delay_by_fault", "delay_vs_mtbfa", "fault_time_posterior", "record_around_fault",
+__all__ = ["DETECTOR_STYLES", "delay_by_fault", "delay_vs_mtbfa", "fault_time_posterior",
+           "ladder_figure", "record_around_fault",
            "roc_curves"]

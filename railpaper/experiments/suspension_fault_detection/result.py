@@ -202,6 +202,10 @@ class FaultDetectionResult(ChapterResult):
         the threshold of the detector's fault-free tail model there, the Kaplan–Meier median
         delay (s; NaN where fewer than half the records are detected) and the probability of
         detection within 2 s.
+    ladder : pandas.DataFrame
+        The realism ladder: one row per (rung, detector, fault) at the ladder's speed and
+        operating point: Kaplan–Meier median delay (s), detection within 0.5 s and 2 s, and
+        within 2 s at the ideal rung's thresholds.
     bank_hypotheses : tuple of (str, float)
         The hypotheses of ``glr`` and ``bayes`` in their order: (parameter name, factor).
     """
@@ -215,6 +219,7 @@ class FaultDetectionResult(ChapterResult):
     roc: pd.DataFrame | None = None
     illustrated: IllustratedRecord | None = None
     delay_curve: pd.DataFrame | None = None
+    ladder: pd.DataFrame | None = None
     bank_hypotheses: tuple[tuple[str, float], ...] = ()
 
     def select(self, *, fault: str | None = None, role: str | None = None,

@@ -56,6 +56,15 @@ SPEC = ChapterSpec(
           "running measured: the fault-free records' monitoring windows are cut into blocks of "
           "this length, and an exponential tail is fitted to the largest block maxima (one "
           "alarm per exceeding block), s", positive=True, changes_records=False),
+        P("ladder_records_per_fault", 10, "int", "realism ladder: records per fault at "
+          "ladder_speed_kmh on each rung beyond the ideal one (below 2: no ladder)", quick=0,
+          minimum=0, changes_records=False),
+        P("ladder_fault_free_records", 20, "int", "realism ladder: fault-free records on each "
+          "rung (half set its thresholds, half check them; below 4: no ladder)", quick=0,
+          minimum=0,
+          changes_records=False),
+        P("ladder_speed_kmh", 300.0, "float", "realism ladder: the speed of its records, km/h "
+          "(one of speeds_kmh)", positive=True),
         P("bank_window_s", 0.1, "float", "bayes and glr: a change is looked for in the last "
           "this many seconds (the window W of the Shiryaev-Roberts sum and the GLR's maximum; "
           "their cost grows with it), s", positive=True),
@@ -80,7 +89,22 @@ WITHIN_S = (0.5, 1.0, 2.0)
 #: railway monitor runs thousands of hours between false alarms).
 MTBFA_TARGETS_H = (10.0, 100.0, 1000.0)
 
+#: The realism ladder's rungs beyond the ideal one (the run's own sensors): cumulative changes
+#: of the sensors, each a dict of settings.  A channel is taken away by making its noise so
+#: large that the filters give it no weight (100 m/s^2 against accelerations of about
+#: 0.1-1 m/s^2; 10 rad/s against yaw rates of about 0.01 rad/s): the limit of removing it.
+#: No published noise level is used: 0.01 rad/s is ten times chapter 003's gyro.
+LADDER = {"no_axlebox_gyro_001": ("bogie and car-body accelerometers, gyro at 0.01 rad/s",
+                                  {"noise_acc_wheelset_mps2": 100.0,
+                                   "noise_yawrate_radps": 0.01}),
+          "accelerometers_only": ("bogie and car-body accelerometers only",
+                                  {"noise_acc_wheelset_mps2": 100.0,
+                                   "noise_yawrate_radps": 10.0})}
+#: The ladder's operating point, h between false alarms.
+LADDER_MTBFA_H = 100.0
+
 #: The grid of the delay against mean time between false alarms picture, h.
 MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
-__all__ = ["DETECTORS", "MTBFA_CURVE_H", "MTBFA_TARGETS_H", "SPEC", "Settings", "WITHIN_S"]
+__all__ = ["DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H", "MTBFA_TARGETS_H", "SPEC",
+           "Settings", "WITHIN_S"]

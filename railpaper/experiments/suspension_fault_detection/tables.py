@@ -22,6 +22,8 @@ from railpaper.experiments.suspension_fault_detection.result import (
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
+    LADDER,
+    LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
     WITHIN_S,
     Settings,
@@ -120,96 +122,101 @@ def faults_table(result) -> str:
         "critical speed after the fault (km/h)"]))
 
 
-def _delay_rows(result, speed_tag: str, suffix: str) -> list[list[str]]:
-    """Per fault, its label and per detector "median [95 %]; within the shortest / longest
-    horizon" of the metrics tagged ``<detector>_<fault>_<speed><suffix>``."""
+def _delay_text(metrics: dict, tag: str) -> str:
+    """"median [95 %]; within the shortest / longest horizon" of the metrics tagged ``tag``."""
+    short, long_ = WITHIN_S[0], WITHIN_S[-1]
+    delay = delay_cell(metrics, tag)
+    a = metrics.get(f"detected_within_{short:g}s_{tag}")
+    b = metrics.get(f"detected_within_{long_:g}s_{tag}")
+    return delay if a is None or b is None else f"{delay}; {percent(a)} / {percent(b)}"
+
+
+def _delay_table(result, settings: Settings, suffix: str) -> str:
+    """One row per fault and detector (the fault named on its first row), one column per speed:
+    :func:`_delay_text` of the metrics tagged ``<detector>_<fault>_<speed><suffix>``."""
     short, long_ = WITHIN_S[0], WITHIN_S[-1]
     rows = []
     for f in result.faults:
-        row = [f.label]
-        for det in DETECTORS:
-            tag = f"{det}_{f.name}_{speed_tag}{suffix}"
-            delay = delay_cell(result.metrics, tag)
-            a = result.metrics.get(f"detected_within_{short:g}s_{tag}")
-            b = result.metrics.get(f"detected_within_{long_:g}s_{tag}")
-            row.append(delay if a is None or b is None else f"{delay}; {percent(a)} / {percent(b)}")
-        rows.append(row)
-    return rows
+        for i, det in enumerate(DETECTORS):
+            rows.append([f.label if i == 0 else "", DETECTOR_SHORT[det]]
+                        + [_delay_text(result.metrics, f"{det}_{f.name}_{speed_key(v)}{suffix}")
+                           for v in settings.speeds_kmh])
+    return markdown(pd.DataFrame(rows, columns=["fault", "detector"] + [
+        f"{v:g} km/h: median delay [95 %] (s); within {short:g} s / {long_:g} s"
+        for v in settings.speeds_kmh]))
 
 
 def detection_table(result, settings: Settings) -> str:
-    """One table per speed (the run's order, each under a bold "<speed> km/h" line), one row
-    per fault and one column per detector: the median detection delay with its 95 % interval
-    over records (s; "beyond the record" where fewer than half the records alarm after the
-    fault), then the shares of records detected within the shortest and the longest horizon;
-    "—" for a detector not run at that speed."""
-    short, long_ = WITHIN_S[0], WITHIN_S[-1]
-    out = []
-    for speed in settings.speeds_kmh:
-        sk = speed_key(speed)
-        columns = ["fault"]
-        for det in DETECTORS:
-            n = next((result.metrics[f"delay_median_s_{det}_{f.name}_{sk}_n"]
-                      for f in result.faults
-                      if f"delay_median_s_{det}_{f.name}_{sk}_n" in result.metrics), None)
-            records = "" if n is None else f", {number(n)} record{'s' if n != 1 else ''}"
-            columns.append(f"{DETECTOR_SHORT[det]}: median delay [95 %] (s{records}); "
-                           f"detected within {short:g} s / {long_:g} s")
-        rows = _delay_rows(result, sk, "")
-        out.append(f"**{speed:g} km/h**\n\n" + markdown(pd.DataFrame(rows, columns=columns)))
-    return "\n".join(out)
+    """One row per fault and detector, one column per speed: the median detection delay with
+    its 95 % interval over records (s; "beyond the record" where fewer than half the records
+    alarm after the fault), then the shares of records detected within the shortest and the
+    longest horizon, at the thresholds of one false-alarm probability per window; "—" for a
+    detector not run at that speed."""
+    return _delay_table(result, settings, "")
 
 
 def operating_point_table(result, settings: Settings, mtbfa_h: float = 100.0) -> str:
-    """One table per speed at one mean time between false alarms (h; a value of
-    :data:`MTBFA_TARGETS_H`): per fault (rows) and detector (columns), the median detection
-    delay with its 95 % interval over records (s; "beyond the record" where fewer than half
-    are detected after the fault) and the share detected within 0.5 s and 2 s, at the
-    detector's threshold for that mean time (its fault-free tail model)."""
-    out = []
+    """As :func:`detection_table`, at each detector's threshold for ``mtbfa_h`` hours between
+    false alarms (a value of :data:`MTBFA_TARGETS_H`; its fault-free tail model)."""
+    return _delay_table(result, settings, f"_at_{mtbfa_h:g}h")
+
+
+def _with_metric(metrics: dict, settings: Settings, prefix: str):
+    """(speed, detector, ``<detector>_<speed>``) of every speed and detector with a metric
+    ``<prefix><detector>_<speed>``, in the run's order."""
     for speed in settings.speeds_kmh:
-        sk = speed_key(speed)
-        columns = ["fault"] + [f"{DETECTOR_SHORT[det]}: median delay [95 %] (s); within "
-                               f"{WITHIN_S[0]:g} s / {WITHIN_S[-1]:g} s" for det in DETECTORS]
-        rows = _delay_rows(result, sk, f"_at_{mtbfa_h:g}h")
-        out.append(f"**{speed:g} km/h, thresholds for {mtbfa_h:g} h between false alarms**\n\n"
-                   + markdown(pd.DataFrame(rows, columns=columns)))
-    return "\n".join(out)
+        for det in DETECTORS:
+            tag = f"{det}_{speed_key(speed)}"
+            if prefix + tag in metrics:
+                yield speed, det, tag
 
 
 def tail_table(result, settings: Settings) -> str:
     """Per speed and detector: the exponential tail of its fault-free block maxima (level,
-    scale, the share of blocks above the level, blocks), the check against the evaluation
+    scale, the share of blocks above the level, blocks) and the check against the evaluation
     records (the mean time between false alarms checked, alarms expected and counted, the
-    Poisson p-value), and its thresholds for :data:`MTBFA_TARGETS_H` (for ``bayes`` with the
-    Shiryaev–Roberts lower bound on the mean time at each)."""
+    Poisson p-value)."""
     rows = []
     m = result.metrics
-    for speed in settings.speeds_kmh:
-        sk = speed_key(speed)
-        for det in DETECTORS:
-            tag = f"{det}_{sk}"
-            if f"tail_level_{tag}" not in m:
-                continue
-            check = NONE
-            if f"tail_check_alarms_{tag}" in m:
-                check = (f"{number(m[f'tail_check_mtbfa_h_{tag}'])} h: "
-                         f"{number(m[f'tail_check_expected_{tag}'])} expected, "
-                         f"{m[f'tail_check_alarms_{tag}']} counted "
-                         f"(p = {number(m[f'tail_check_p_{tag}'], 2)})")
-            thresholds = []
-            for target in MTBFA_TARGETS_H:
-                text = number(m[f"threshold_at_{target:g}h_{tag}"])
-                bound = m.get(f"sr_bound_mtbfa_h_at_{target:g}h_{tag}")
-                if bound is not None:
-                    text += f" (≥ {number(bound, 2)} h)"
-                thresholds.append(text)
-            rows.append((number(speed), DETECTOR_SHORT[det], number(m[f"tail_level_{tag}"]),
-                         number(m[f"tail_scale_{tag}"]), percent(m[f"tail_exceed_{tag}"]),
-                         number(m[f"tail_blocks_{tag}"]), check, *thresholds))
+    for speed, det, tag in _with_metric(m, settings, "tail_level_"):
+        check = NONE
+        if f"tail_check_alarms_{tag}" in m:
+            check = (f"at {number(m[f'tail_check_mtbfa_h_{tag}'], 2)} h: "
+                     f"{number(m[f'tail_check_expected_{tag}'], 2)} expected, "
+                     f"{m[f'tail_check_alarms_{tag}']} counted "
+                     f"(p = {number(m[f'tail_check_p_{tag}'], 2)})")
+        rows.append((number(speed), DETECTOR_SHORT[det],
+                     f"{number(m[f'tail_level_{tag}'])} + Exp({number(m[f'tail_scale_{tag}'])})",
+                     f"{percent(m[f'tail_exceed_{tag}'])} of {number(m[f'tail_blocks_{tag}'])}",
+                     check))
     return markdown(pd.DataFrame(rows, columns=[
-        "speed (km/h)", "detector", "tail from", "tail scale", "blocks above", "blocks",
-        "check on the evaluation records"] + [f"threshold for {t:g} h" for t in MTBFA_TARGETS_H]))
+        "speed (km/h)", "detector", "tail of the block maxima", "blocks in the tail",
+        "check on the evaluation records"]))
+
+
+def threshold_table(result, settings: Settings) -> str:
+    """Per speed and detector, its threshold for each of :data:`MTBFA_TARGETS_H` with its 95 %
+    interval over calibration records resampled, the range of mean times the resampled tails
+    give at it, and for ``bayes`` the Shiryaev–Roberts lower bound on the mean time."""
+    rows = []
+    m = result.metrics
+    for speed, det, tag in _with_metric(m, settings, f"threshold_at_{MTBFA_TARGETS_H[0]:g}h_"):
+        cells = []
+        for target in MTBFA_TARGETS_H:
+            key = f"threshold_at_{target:g}h_{tag}"
+            text = number(m[key])
+            if key + "_low" in m:
+                high = m.get(f"mtbfa_h_at_{target:g}h_{tag}_high")
+                text += (f" [{number(m[key + '_low'])}, {number(m[key + '_high'])}]; "
+                         f"{number(m[f'mtbfa_h_at_{target:g}h_{tag}_low'], 2)} to "
+                         + ("unbounded" if high is None else f"{number(high, 2)} h"))
+            bound = m.get(f"sr_bound_mtbfa_h_at_{target:g}h_{tag}")
+            if bound is not None:
+                text += f"; bound ≥ {number(bound, 2)} h"
+            cells.append(text)
+        rows.append((number(speed), DETECTOR_SHORT[det], *cells))
+    return markdown(pd.DataFrame(rows, columns=["speed (km/h)", "detector"] + [
+        f"for {t:g} h: threshold [95 %]; the mean time it gives [95 %]" for t in MTBFA_TARGETS_H]))
 
 
 def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
@@ -224,6 +231,41 @@ def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
             names = failed[0] if len(failed) == 1 else ", ".join(failed[:-1]) + " and " + failed[-1]
             parts.append(f"{names} at {speed:g} km/h")
     return "; ".join(parts) if parts else "no detector"
+
+
+#: Short names of the realism ladder's rungs.
+RUNG_SHORT = {"ideal": "ideal (five channels)",
+              "no_axlebox_gyro_001": "no axle-box accelerometers, gyro 0.01 rad/s",
+              "accelerometers_only": "bogie and car-body accelerometers only"}
+
+
+def ladder_table(result, settings: Settings) -> str:
+    """The realism ladder at ``ladder_speed_kmh``, thresholds for :data:`LADDER_MTBFA_H` hours
+    between false alarms recalibrated on each rung: one row per fault and detector, one column
+    per rung: the Kaplan–Meier median delay with its 95 % interval (s; "not reached" where fewer
+    than half the records are detected), the share detected within 2 s, and in brackets the
+    share within 2 s at the ideal rung's thresholds; "—" where the ladder did not run."""
+    m = result.metrics
+    sk = speed_key(settings.ladder_speed_kmh)
+    rungs = ["ideal"] + list(LADDER)
+    rows = []
+    for f in result.faults:
+        for i, det in enumerate(DETECTORS):
+            row = [f.label if i == 0 else "", DETECTOR_SHORT[det]]
+            tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
+            for rung in rungs:
+                key = f"ladder_{rung}_km_delay_median_s_{tag}"
+                if f"ladder_{rung}_km_delay_median_reached_{tag}" not in m:
+                    row.append(NONE)
+                    continue
+                text = interval_text(m, key) if key in m else "not reached"
+                within = m.get(f"ladder_{rung}_detected_within_2s_{tag}")
+                text += "" if within is None else f"; {percent(within)}"
+                ideal = m.get(f"ladder_{rung}_ideal_thresholds_detected_within_2s_{tag}")
+                row.append(text + ("" if ideal is None else f" ({percent(ideal)})"))
+            rows.append(row)
+    return markdown(pd.DataFrame(rows, columns=["fault", "detector"] + [
+        f"{RUNG_SHORT.get(r, r)}: median delay [95 %] (s); within 2 s" for r in rungs]))
 
 
 def false_alarm_table(result, settings: Settings) -> str:
@@ -275,9 +317,8 @@ def estimate_table(result, settings: Settings) -> str:
                 row.append(text)
             rows.append(row)
     return markdown(pd.DataFrame(rows, columns=["speed (km/h)", "fault"] + [
-        f"{DETECTOR_SHORT[d]}: median abs. error [95 %] (fraction of nominal)"
-        for d in estimators] + [f"{DETECTOR_SHORT[d]} alarms blamed on the right parameter "
-                                "[95 %]" for d in blamers]))
+        f"{DETECTOR_SHORT[d]}: error [95 %]" for d in estimators] + [
+        f"{DETECTOR_SHORT[d]}: right parameter [95 %]" for d in blamers]))
 
 
 def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
@@ -295,7 +336,8 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
     return ", ".join(parts) if parts else "no fault-free records"
 
 
-__all__ = ["DETECTOR_SHORT", "PARAMETERS", "STATISTICS", "clean", "delay_cell", "delay_text",
-           "detection_table", "estimate_table", "false_alarm_table", "fault_free_flange_text",
-           "fault_short_label", "faults_table", "interval_text", "operating_point_table",
-           "percent", "tail_check_failures", "tail_table"]
+__all__ = ["DETECTOR_SHORT", "PARAMETERS", "RUNG_SHORT", "STATISTICS", "clean", "delay_cell",
+           "delay_text", "detection_table", "estimate_table", "false_alarm_table",
+           "fault_free_flange_text", "fault_short_label", "faults_table", "interval_text",
+           "ladder_table", "operating_point_table", "percent", "tail_check_failures",
+           "tail_table", "threshold_table"]

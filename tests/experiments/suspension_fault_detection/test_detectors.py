@@ -133,6 +133,8 @@ def test_a_hunting_record_ends_before_flange_contact(setup):
     ({"duration_s": 3.0}, "must be >= 4 s"),
     ({"speeds_kmh": [300.0], "dt_s": 0.05}, "'dt_s'"),
     ({"bank_window_s": 0.001}, "shorter than one sample"),
+    ({"ladder_records_per_fault": 2, "ladder_fault_free_records": 4, "speeds_kmh": [200.0]},
+     "'ladder_speed_kmh' = 300 km/h is not one of speeds_kmh (200)"),
 ])
 def test_bad_parameters_are_refused_in_one_line(overrides, words):
     """Before any work (the CLI's one line and exit 2 are tests/pipeline/test_hardening.py's)."""
@@ -243,3 +245,22 @@ def test_the_window_against_the_unwindowed_statistic_on_short_records(setup, fau
         assert np.max(full[inside] - log_r[inside]) < 1e-2
     if fault is not None:
         assert abs(int(np.argmax(full >= 10.0)) - int(np.argmax(log_r >= 10.0))) <= 2
+
+
+def test_a_ladder_rung_keeps_its_operating_point_and_tail_check():
+    """Of a rung's evidence, the ladder keeps detection within 0.5 s and 2 s, the Kaplan-Meier
+    median, the thresholds and the mean times at 100 h, and the tail check, each prefixed with
+    the rung; nothing at another operating point, nothing else."""
+    metrics = {"detected_within_2s_bayes_csaly_0_300kmh_at_100h": 1.0,
+               "detected_within_2s_bayes_csaly_0_300kmh_at_1000h": 0.9,
+               "detected_within_1s_bayes_csaly_0_300kmh_at_100h": 1.0,
+               "km_delay_median_s_glr_ksy_70_300kmh_at_100h_low": 0.2,
+               "threshold_at_100h_cusum_300kmh": 9.3, "threshold_at_10h_cusum_300kmh": 8.0,
+               "mtbfa_h_at_100h_cusum_300kmh_high": 5.0, "tail_check_p_cusum_300kmh": 0.06,
+               "isolated_bayes_csaly_0_300kmh_at_100h": 1.0}
+    kept = chapter._kept(metrics, "ladder_r_")
+    assert kept == {"ladder_r_detected_within_2s_bayes_csaly_0_300kmh_at_100h": 1.0,
+                    "ladder_r_km_delay_median_s_glr_ksy_70_300kmh_at_100h_low": 0.2,
+                    "ladder_r_threshold_at_100h_cusum_300kmh": 9.3,
+                    "ladder_r_mtbfa_h_at_100h_cusum_300kmh_high": 5.0,
+                    "ladder_r_tail_check_p_cusum_300kmh": 0.06}
