@@ -256,7 +256,7 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
         worse = settings.replace(**overrides)
         rungs[rung] = []
         for i, (fault_name, role, seed) in enumerate(items):
-            progress((n * len(items) + i) / (len(LADDER) * len(items)),
+            progress(0.95 + 0.04 * (n * len(items) + i) / (len(LADDER) * len(items)),
                      f"ladder {rung}, {fault_name}, seed {seed}")
             run_, _ = run_record(worse, fault_settings, fixed, theta, by_name.get(fault_name),
                                  role, speed, seed, values, bank)
@@ -331,7 +331,7 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
     for s, speed in enumerate(speeds):
         for i, (fault_name, role, seed) in enumerate(items):
             progress(0.95 * (s * len(items) + i) / total,
-                     f"{speed:g} km/h, {fault_name}, seed {seed}")
+                     f"{speed:g} km/h, {fault_name}, seed {seed}")  # the ladder: 0.95-0.99
             run_, extra = run_record(settings, fault_settings, fixed, theta,
                                      by_name.get(fault_name), role, speed, seed, values, bank)
             records_.append(run_)
@@ -348,7 +348,10 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
     metrics.update(ladder_metrics)
     critical = faults.critical_speeds(fixed, theta, chosen)
     for row in critical.itertuples():
-        metrics[f"critical_speed_kmh_{row.fault}"] = row.critical_speed_kmh
+        found = bool(np.isfinite(row.critical_speed_kmh))        # else: stable to the search's end
+        metrics[f"critical_speed_found_{row.fault}"] = found
+        if found:
+            metrics[f"critical_speed_kmh_{row.fault}"] = row.critical_speed_kmh
     metrics["records"] = len(records_)
     progress(1.0, "done")
     timings = {"total_s": time.perf_counter() - started}

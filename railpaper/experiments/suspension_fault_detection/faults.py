@@ -10,7 +10,7 @@ import pandas as pd
 
 from railpaper.data import DataError, load_quantities, read_toml
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
-from railpaper.experiments.suspension_fault_detection.spec import SPEC
+from railpaper.experiments.suspension_fault_detection.spec import CRITICAL_SEARCH_TOP_KMH, SPEC
 from railpaper.models import lateral_16state
 from railpaper.paths import DATA_DIR
 
@@ -20,7 +20,7 @@ SETTINGS = ("drift_s", "drift_pieces", "fault_time_first_s", "fault_time_last_s"
             "fault_time_spacing_s", "p_no_fault", "flange_clearance_m")
 KINDS = ("abrupt", "drift")
 #: Speeds searched for the critical speed, km/h.
-CRITICAL_SEARCH_KMH = np.arange(100.0, 600.0 + 1e-9, 2.5)
+CRITICAL_SEARCH_KMH = np.arange(100.0, CRITICAL_SEARCH_TOP_KMH + 1e-9, 2.5)
 
 
 def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
@@ -105,7 +105,7 @@ def schedule(fault: Fault | None, fault_settings: dict, theta: np.ndarray, fault
 
 def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.DataFrame:
     """The model's critical speed, km/h, fault-free and after each fault has fully developed
-    (−1: stable up to the search's end, :data:`CRITICAL_SEARCH_KMH`)."""
+    (NaN: stable up to the search's end, :data:`CRITICAL_SEARCH_KMH`)."""
     rows = []
     for fault in [None] + list(faults):
         changed = theta.copy()
@@ -114,7 +114,7 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
         _, v = lateral_16state.critical_speed(fixed, changed, CRITICAL_SEARCH_KMH / 3.6)
         rows.append({"fault": NO_FAULT if fault is None else fault.name,
                      "label": "fault-free" if fault is None else fault.label,
-                     "critical_speed_kmh": v * 3.6 if v > 0 else -1.0})
+                     "critical_speed_kmh": v * 3.6 if v > 0 else np.nan})
     return pd.DataFrame(rows)
 
 

@@ -191,8 +191,8 @@ class FaultDetectionResult(ChapterResult):
     monitor_from_s : float
         Alarms count from this time (the first possible fault time), s.
     critical_speeds : pandas.DataFrame
-        Per fault (and ``none``): the model's critical (hunting) speed, km/h (−1: above the
-        range searched), after the fault has fully developed.
+        Per fault (and ``none``): the model's critical (hunting) speed, km/h (NaN: stable up to
+        the top of the range searched), after the fault has fully developed.
     roc : pandas.DataFrame
         One row per (detector, speed, fault, threshold): false alarms per hour and the rate of
         detection within 1 s.

@@ -82,6 +82,9 @@ DETECTORS = {"cusum": "variance CUSUM of the nominal filter's whitened innovatio
              "bayes": "mixture Shiryaev-Roberts over any parameter, factor and change time",
              "oracle": "change posterior knowing the catalogue's faults and fault-time grid"}
 
+#: The top of the critical-speed search, km/h (a model stable up to it is reported as "above").
+CRITICAL_SEARCH_TOP_KMH = 600.0
+
 #: Detection horizons after the fault, s.
 WITHIN_S = (0.5, 1.0, 2.0)
 
@@ -106,5 +109,5 @@ LADDER_MTBFA_H = 100.0
 #: The grid of the delay against mean time between false alarms picture, h.
 MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
-__all__ = ["DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H", "MTBFA_TARGETS_H", "SPEC",
-           "Settings", "WITHIN_S"]
+__all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
+           "MTBFA_TARGETS_H", "SPEC", "Settings", "WITHIN_S"]

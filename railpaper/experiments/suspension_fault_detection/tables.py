@@ -11,6 +11,8 @@ interval end) that lies beyond it (``delay_median_reached_<tag>`` False: no numb
 
 from __future__ import annotations
 
+import math
+
 import pandas as pd
 
 from railpaper.experiments.display import markdown, number
@@ -21,6 +23,7 @@ from railpaper.experiments.suspension_fault_detection.result import (
     speed_key,
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
+    CRITICAL_SEARCH_TOP_KMH,
     DETECTORS,
     LADDER,
     LADDER_MTBFA_H,
@@ -99,18 +102,20 @@ def interval_text(metrics: dict, key: str, show=number) -> str:
 def faults_table(result) -> str:
     """One row per fault (and the fault-free vehicle first): its label, the parameter it changes,
     the parameter's value after the fault (% of nominal), abrupt or drifting, and the model's
-    critical (hunting) speed once the fault has fully developed (−1: above the 600 km/h
-    searched)."""
+    critical (hunting) speed once the fault has fully developed ("above 600" where the model is
+    stable up to the top of the search, :data:`CRITICAL_SEARCH_TOP_KMH`)."""
     critical = {}
     if result.critical_speeds is not None:
         critical = dict(zip(result.critical_speeds["fault"],
                             result.critical_speeds["critical_speed_kmh"]))
 
     def speed(name: str) -> str:
-        value = critical.get(name, result.metrics.get(f"critical_speed_kmh_{name}"))
+        value = critical.get(name)
         if value is None:
-            return NONE
-        return "above 600" if value < 0 else number(value)
+            if f"critical_speed_found_{name}" not in result.metrics:
+                return NONE
+            value = result.metrics.get(f"critical_speed_kmh_{name}", math.nan)
+        return f"above {CRITICAL_SEARCH_TOP_KMH:g}" if not math.isfinite(value) else number(value)
 
     rows = [("fault-free", NONE, "100", NONE, speed(NO_FAULT))]
     for f in result.faults:

@@ -146,3 +146,23 @@ def test_tail_check_and_operating_points_by_hand():
     h = 8.0 + 1.5 * math.log(0.2 * 100 * 3600 / 0.5)
     assert m["threshold_at_100h_bayes_300kmh"] == pytest.approx(h)
     assert m["sr_bound_mtbfa_h_at_100h_bayes_300kmh"] == pytest.approx(math.exp(h) * 0.5 / 3600)
+
+
+def test_a_critical_speed_beyond_the_search_is_a_field_not_a_number():
+    """A fault whose model is stable up to the search's top writes critical_speed_found_<fault>
+    False and no speed; the faults table says "above 600" for it, the speed for a found one and
+    "—" for a fault without either field."""
+    from types import SimpleNamespace
+
+    from railpaper.experiments.suspension_fault_detection.result import Fault
+    from railpaper.experiments.suspension_fault_detection.tables import faults_table
+    faults = (Fault("stiff", "kpy", 3.0, "abrupt", "stiffer"), Fault("soft", "ksy", 0.7,
+                                                                     "abrupt", "softer"),
+              Fault("odd", "csy", 0.5, "abrupt", "odd"))
+    metrics = {"critical_speed_found_none": True, "critical_speed_kmh_none": 456.4,
+               "critical_speed_found_stiff": False, "critical_speed_found_soft": True,
+               "critical_speed_kmh_soft": 451.4}
+    table = faults_table(SimpleNamespace(metrics=metrics, faults=faults, critical_speeds=None))
+    rows = [line for line in table.splitlines() if line.startswith("| ")][1:]
+    assert rows[0].endswith("| 456.4 |") and rows[1].endswith("| above 600 |")
+    assert rows[2].endswith("| 451.4 |") and rows[3].endswith("| — |")
