@@ -1,6 +1,7 @@
 """Appendix ``suspension-fault-detection`` (no paper: our study on paper 003's lateral vehicle):
-how soon a failed anti-yaw damper or a softened secondary spring shows in the data, by the
-residual test, paper 003's RBPF and the exact change posterior.
+how soon a failed anti-yaw damper or a softened secondary spring shows in the data, by two
+residual tests (cusum, chi2), two detectors that do not know the fault (glr, bayes) and an
+oracle that does, at thresholds for hours between false alarms, on a ladder of sensors.
 
 ``SPEC``, its ``Settings``, ``validate(settings)`` and ``run(settings, progress=None)`` are what
 the pipeline needs; the package's modules are the appendix's parts (``experiment`` is the whole

@@ -5,7 +5,7 @@ The truth is simulated exactly on the fine grid with θ piecewise constant
 (:func:`railpaper.models.lateral_16state.simulate_truth_schedule`); the measurement matrix
 changes with θ too, because the four accelerations are rows of A(θ) x.  A sample at time t_k
 reads θ of the transition that ended there, so a fault at time τ = j·dt_s first shows in filter
-step j + 1 (1-based), both in the data and in the exact reference's hypothesis "τ = j + 1".
+step j + 1 (1-based), both in the data and in the oracle's hypothesis "τ = j + 1".
 Where a fault makes the vehicle hunt, the record ends at the last sample before a wheelset
 reaches flange contact: the linear model has no flange.
 """

@@ -21,8 +21,8 @@ SPEC = ChapterSpec(
         P("seed", 0, "int", "first record: fault records use seeds seed … seed + 299, fault-free "
           "ones seed + 300 … seed + 899; record seed is the one illustrated", minimum=0,
           changes_records=False),
-        P("speeds_kmh", [300.0, 200.0], "list[float]", "vehicle speeds, km/h (the RBPF runs at "
-          "the first)", positive=True),
+        P("speeds_kmh", [300.0, 200.0], "list[float]", "vehicle speeds, km/h (the illustrated "
+          "record is at the first)", positive=True),
         P("faults", "csaly_half,csaly_20,csaly_0,ksy_70,csaly_drift", "str",
           "comma-separated fault names of data/suspension-fault-detection/faults.toml"),
         P("extra_fault_parameter", "", "str", "one more abrupt fault of your own: the parameter "
