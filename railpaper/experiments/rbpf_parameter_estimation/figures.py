@@ -77,9 +77,10 @@ def critical_speed(result, settings: Settings):
              "wheelset_bogie_doubled": "wheelset and bogie masses doubled"}
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for key, label in names.items():
-        vc = m[f"critical_speed_kmh_{key}"]
+        vc = m.get(f"critical_speed_kmh_{key}")          # absent: stable to the search's end
         ax.plot(crit.speed_kmh, crit[key],
-                label=f"{label}: " + (f"hunting from {vc:.0f} km/h" if vc > 0 else "no hunting"))
+                label=f"{label}: " + (f"hunting from {vc:.0f} km/h" if vc is not None
+                                      else "no hunting"))
     ax.axhline(0, color="k", lw=0.8)
     ax.axvline(settings.speed_kmh, color="0.5", ls=":", label="test speed")
     ax.set(xlabel="speed (km/h)", ylabel="max real part of eigenvalues (1/s)")

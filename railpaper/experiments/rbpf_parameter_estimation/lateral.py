@@ -176,7 +176,9 @@ def critical_speeds(fixed: dict, theta: np.ndarray, settings: Settings
     for key, fx in (("chosen", fixed), ("all_halved", halved), ("wheelset_bogie_doubled", doubled)):
         re, vc = lateral_16state.critical_speed(fx, theta, speeds)
         curves[key] = re
-        metrics[f"critical_speed_kmh_{key}"] = vc * 3.6 if vc > 0 else -1
+        metrics[f"critical_speed_found_{key}"] = bool(vc > 0)   # else: stable to the search's end
+        if vc > 0:
+            metrics[f"critical_speed_kmh_{key}"] = vc * 3.6
     A = lateral_16state.build_A_direct(fixed, theta, settings.speed_kmh / 3.6)
     metrics["least_damped_real_at_speed_per_s"] = lateral_16state.least_damped(A)[0]
     return pd.DataFrame({"speed_kmh": speeds * 3.6, **curves}), metrics

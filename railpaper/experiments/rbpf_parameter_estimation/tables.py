@@ -142,11 +142,12 @@ def caption_values(result, settings: Settings) -> dict[str, str]:
         out[f"toy_err_ekf_{ic}"] = number(one.ekf_err_max[ic], 3)
     if lat is None:
         return out | posterior_caption_values(result, settings)
-    hunting = {k: m[f"critical_speed_kmh_{k}"] for k in ("chosen", "all_halved",
-                                                            "wheelset_bogie_doubled")}
-    for key, v in hunting.items():
+    hunting = {k: m.get(f"critical_speed_kmh_{k}") for k in ("chosen", "all_halved",
+                                                                "wheelset_bogie_doubled")}
+    for key, v in hunting.items():                 # no speed: stable to the search's end
         top = lat.critical_speed.speed_kmh.max()
-        out[f"hunting_{key}"] = f"at {v:.0f} km/h" if v > 0 else f"at no speed up to {top:.0f} km/h"
+        out[f"hunting_{key}"] = (f"at {v:.0f} km/h" if v is not None
+                                 else f"at no speed up to {top:.0f} km/h")
     n, K = len(lat.runs), len(lat.t_s)
     n_paper, n_working = len(lat.paper_scheme_rows) or n, len(lat.working_scheme_rows) or n
     out.update(lat_records=(f"{n} ({n_paper} for the paper's scheme, {n_working} for ours)"
