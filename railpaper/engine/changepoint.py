@@ -274,11 +274,7 @@ def change_statistics(lik: ChangeLikelihoods, window_steps: int | None = None,
     V, J, K = lik.changed.shape
     if window_steps is not None and window_steps < 1:
         raise ValueError(f"window_steps must be >= 1 or None, got {window_steps}")
-    w = np.full(V, 1.0 / V) if prior is None else np.asarray(prior, float)
-    if w.shape != (V,) or np.any(w < 0) or w.sum() <= 0:
-        raise ValueError(f"prior must be non-negative weights of shape {(V,)}")
-    with np.errstate(divide="ignore"):
-        log_w = np.log(w / w.sum())
+    log_w = _log_prior(prior, V)
     steps = np.arange(1, K + 1)
     tau = lik.tau_steps[:, None]
     inside = tau <= steps[None, :]                                           # (J, K)
@@ -355,11 +351,7 @@ def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatc
     before = np.atleast_2d(np.asarray(theta_before, float))
     after = np.atleast_2d(np.asarray(thetas_after, float))
     V = after.shape[0]
-    w = np.full(V, 1.0 / V) if prior is None else np.asarray(prior, float)
-    if w.shape != (V,) or np.any(w < 0) or w.sum() <= 0:
-        raise ValueError(f"prior must be non-negative weights of shape {(V,)}")
-    with np.errstate(divide="ignore"):
-        log_w = np.log(w / w.sum())
+    log_w = _log_prior(prior, V)
     U = None if u is None else np.asarray(u, float).reshape(K, -1)
     nominal, post = system(before), system(after)
     n = np.asarray(x0).shape[-1]
@@ -390,13 +382,11 @@ def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatc
     log_ratio = np.where(live, total - before_restart, -np.inf)
     v_of_lane = np.tile(np.arange(V), W)
     weighted = log_ratio + log_w[v_of_lane][:, None]
-    top = weighted.max(axis=0)
-    safe = np.where(np.isfinite(top), top, 0.0)
     log_sr = np.full(K, -np.inf)
     glr = np.full(K, -np.inf)
     glr_value = np.full(K, -1, dtype=np.int64)
     glr_step = np.full(K, -1, dtype=np.int64)
-    log_sr[t0:] = safe + np.log(np.exp(weighted - safe).sum(axis=0))
+    log_sr[t0:] = _logsumexp(weighted)
     best = np.argmax(log_ratio, axis=0)
     glr[t0:] = log_ratio[best, t]
     glr_value[t0:] = v_of_lane[best]
@@ -404,6 +394,16 @@ def windowed_change_statistics(system: Callable[[np.ndarray], LinearGaussianBatc
     return WindowedChangeStatistics(log_shiryaev_roberts=log_sr, glr=glr, glr_value=glr_value,
                                     glr_change_step=glr_step, window_steps=W,
                                     filter_steps=steps_run)
+
+
+def _log_prior(prior: np.ndarray | None, V: int) -> np.ndarray:
+    """log of the values' prior weights ``prior`` (V,), normalised to 1 (uniform when None);
+    one line of ValueError unless they are non-negative with a positive sum."""
+    w = np.full(V, 1.0 / V) if prior is None else np.asarray(prior, float)
+    if w.shape != (V,) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"prior must be non-negative weights of shape {(V,)}")
+    with np.errstate(divide="ignore"):
+        return np.log(w / w.sum())
 
 
 def _logsumexp(a: np.ndarray) -> np.ndarray:

@@ -289,6 +289,21 @@ def false_alarm_tail(runs: list[RecordRun], detector: str, first_row: int, block
         return None
 
 
+#: The detectors whose alarms come with a diagnosis (the GLR's best hypothesis).
+BLAMING = ("glr", "bayes")
+
+
+def blame_metrics(runs: list[RecordRun], outcomes: pd.DataFrame, detector: str, dt_s: float,
+                  hypothesis_parameter: np.ndarray | None, fault_parameter: dict | None,
+                  fault: str, tag: str) -> dict:
+    """:func:`isolation_metrics` of one fault's records for a detector of :data:`BLAMING`,
+    given the hypotheses' and the faults' parameters; nothing otherwise."""
+    if detector not in BLAMING or hypothesis_parameter is None or fault_parameter is None:
+        return {}
+    return isolation_metrics(runs, outcomes, dt_s, hypothesis_parameter,
+                             fault_parameter[fault], tag)
+
+
 #: Bootstrap resamples (over calibration records) of each detector's false-alarm tail.
 TAIL_RESAMPLES = 200
 
@@ -376,10 +391,8 @@ def operating_point_metrics(tail: ExponentialTail, runs_of: dict, detector: str,
             outcomes = detector_outcomes(runs, detector, h, first_row, dt_s)
             tag = f"{detector}_{fault}_{speed_tag}_at_{target:g}h"
             m.update(fault_metrics(outcomes, tag))
-            if detector in ("glr", "bayes") and hypothesis_parameter is not None \
-                    and fault_parameter is not None:
-                m.update(isolation_metrics(runs, outcomes, dt_s, hypothesis_parameter,
-                                           fault_parameter[fault], tag))
+            m.update(blame_metrics(runs, outcomes, detector, dt_s, hypothesis_parameter,
+                                   fault_parameter, fault, tag))
     return m
 
 
@@ -451,11 +464,9 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
                 ftag = f"{detector}_{fault}_{speed_key(speed)}"
                 metrics.update(fault_metrics(outcomes_of[fault], ftag))
                 metrics.update(estimate_metrics(runs, detector, ftag))
-                if detector in ("glr", "bayes") and hypothesis_parameter is not None \
-                        and fault_parameter is not None:
-                    metrics.update(isolation_metrics(runs, outcomes_of[fault], dt_s,
-                                                     hypothesis_parameter,
-                                                     fault_parameter[fault], ftag))
+                metrics.update(blame_metrics(runs, outcomes_of[fault], detector, dt_s,
+                                             hypothesis_parameter, fault_parameter, fault,
+                                             ftag))
             for row in roc_rows(calibration, evaluation, outcomes_of, detector, first_row,
                                 dt_s):
                 roc.append(dict(row, speed_kmh=speed))
@@ -478,6 +489,6 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
-__all__ = ["TAIL_RESAMPLES", "censored_median", "delay_curve_rows", "evidence",
-           "false_alarm_tail", "isolation_metrics", "operating_point_metrics", "tail_check",
-           "tail_intervals", "threshold", "watched_h", "window_rows"]
+__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median", "delay_curve_rows",
+           "evidence", "false_alarm_tail", "isolation_metrics", "operating_point_metrics",
+           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

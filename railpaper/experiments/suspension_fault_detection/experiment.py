@@ -262,6 +262,7 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
                                  role, speed, seed, values, bank)
             rungs[rung].append(run_)
     monitor_from = float(grid_s[0])
+    first_row = window_rows(settings.dt_s, monitor_from)
     sk = speed_key(speed)
     metrics, rows, ideal_thresholds = {}, [], {}
     for rung, records_ in rungs.items():
@@ -272,10 +273,9 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
         if rung == "ideal":
             ideal_thresholds = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}")
                                 for d in DETECTORS}
-        first_row = window_rows(settings.dt_s, monitor_from)
+        free = [r for r in records_ if r.role == "evaluation"]
         for det in DETECTORS:
             h_ideal = ideal_thresholds.get(det)
-            free = [r for r in records_ if r.role == "evaluation"]
             if rung != "ideal" and h_ideal is not None and free:
                 fa = false_alarm_metrics(free, det, h_ideal, first_row, settings.dt_s,
                                          f"{det}_{sk}")
