@@ -20,6 +20,9 @@ of both, independent of any detector:
   threshold at a mean time; :func:`shiryaev_roberts_mtbfa_lower_h` — the bound E[T] ≥ A of a
   Shiryaev–Roberts detector with threshold A (Pollak 1987), for a detector whose likelihood
   ratios are exact;
+* :func:`poisson_excess_power` and :func:`running_for_power` — how much fault-free running a
+  direct check of a tail model needs: the power of the one-sided Poisson test that finds
+  ``ratio`` times the alarms the model predicts at a threshold for a given mean time;
 * :func:`kaplan_meier` and :func:`kaplan_meier_median` — detection delays are censored (a record
   ends, or reaches flange contact, before the alarm): the Kaplan–Meier survival curve, its median
   with the Brookmeyer–Crowley interval (Greenwood's variance, log–log transformed), and
@@ -127,6 +130,33 @@ def block_maxima(statistic: Sequence[float], first_row: int, block_rows: int) ->
     x = np.asarray(statistic, float)[first_row:]
     blocks = x.size // block_rows
     return x[:blocks * block_rows].reshape(blocks, block_rows).max(axis=1)
+
+
+def poisson_excess_power(mean: float | np.ndarray, ratio: float, alpha: float = 0.05
+                         ) -> float | np.ndarray:
+    """Power of the one-sided level-``alpha`` test of a Poisson count of expected ``mean``
+    (alarms the model predicts) against ``ratio`` × ``mean``: it rejects at a count ≥ c, c the
+    smallest with P(X ≥ c | mean) ≤ ``alpha``; the power is P(X ≥ c | ratio · mean)."""
+    mean = np.asarray(mean, float)
+    critical = scipy_stats.poisson.isf(alpha, mean) + 1.0        # P(X > isf) <= alpha
+    power = scipy_stats.poisson.sf(critical - 1.0, ratio * mean)
+    return float(power) if power.ndim == 0 else power
+
+
+def running_for_power(check_mtbfa_h: float, record_s: float, ratio: float = 2.0,
+                      alpha: float = 0.05, power: float = 0.8, most: int = 100_000) -> int:
+    """The fewest records of ``record_s`` seconds of fault-free running whose alarm count at a
+    threshold set for ``check_mtbfa_h`` hours finds ``ratio`` times the predicted alarms with
+    :func:`poisson_excess_power` ≥ ``power`` (the first such size: the power of a discrete
+    test is a sawtooth in the size, and the one reached is what the caller reports)."""
+    if check_mtbfa_h <= 0 or record_s <= 0 or ratio <= 1:
+        raise ValueError("need check_mtbfa_h > 0, record_s > 0 and ratio > 1")
+    records = np.arange(1, most + 1)
+    reached = poisson_excess_power(records * record_s / SECONDS_PER_HOUR / check_mtbfa_h,
+                                   ratio, alpha) >= power
+    if not reached.any():
+        raise ValueError(f"no size up to {most} records reaches power {power:g}")
+    return int(records[np.argmax(reached)])
 
 
 @dataclass(frozen=True)
@@ -279,5 +309,5 @@ def detected_within(times: Sequence[float], observed: Sequence[bool], horizon_s:
 __all__ = ["ExponentialTail", "FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve",
            "block_maxima", "cusum_alarms", "cusum_average_run_length", "detected_within",
            "fit_exponential_tail", "kaplan_meier", "kaplan_meier_median",
-           "mean_time_between_false_alarms_h", "restarted_cusum_alarms",
-           "shiryaev_roberts_mtbfa_lower_h"]
+           "mean_time_between_false_alarms_h", "poisson_excess_power", "restarted_cusum_alarms",
+           "running_for_power", "shiryaev_roberts_mtbfa_lower_h"]

@@ -15,6 +15,8 @@ from railpaper.monitoring import (
     kaplan_meier,
     kaplan_meier_median,
     mean_time_between_false_alarms_h,
+    poisson_excess_power,
+    running_for_power,
 )
 
 
@@ -159,3 +161,23 @@ def test_shiryaev_roberts_bound_by_hand_and_by_simulation():
         length[alive] += 1
         alive &= r < 50.0
     assert length.mean() > 50.0
+
+
+def test_poisson_excess_power_by_a_brute_force_sum():
+    # mean 10: P(X >= 15 | 10) = 0.0835 > 0.05 >= P(X >= 16 | 10) = 0.0487, so the test
+    # rejects from 16 alarms; the power is P(X >= 16 | 20), summed term by term here
+    def tail(k, mean):
+        return 1.0 - sum(math.exp(-mean) * mean ** j / math.factorial(j) for j in range(k))
+    assert tail(15, 10.0) > 0.05 >= tail(16, 10.0)
+    assert poisson_excess_power(10.0, 2.0) == pytest.approx(tail(16, 20.0), abs=1e-12)
+    assert poisson_excess_power(10.0, 2.0) == pytest.approx(0.8435, abs=1e-4)
+
+
+def test_running_for_power_is_the_first_size_that_reaches_the_power():
+    # records of 3 s at a threshold for 0.1 h: n records predict n * 3 / 360 alarms
+    n = running_for_power(0.1, 3.0)
+    assert poisson_excess_power(n * 3.0 / 360.0, 2.0) >= 0.8
+    assert all(poisson_excess_power(m * 3.0 / 360.0, 2.0) < 0.8 for m in range(1, n))
+    assert n == 1088
+    with pytest.raises(ValueError):
+        running_for_power(0.1, 3.0, ratio=1.0)

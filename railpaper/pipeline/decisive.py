@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from railpaper.experiments import load_chapter
 from railpaper.experiments.records import RecordStudy, map_in_process
@@ -120,7 +121,9 @@ class StudyPlan:
 
 
 def plan(chapters: list[str]) -> list[StudyPlan]:
-    """Every study the registered rows read, at the largest size registered for it."""
+    """Every study the registered rows read, at the largest size registered for it, and every
+    study a chapter sizes itself (its ``stored_sizes(settings)``: evidence no declared row
+    decides, such as the fault appendix's long fault-free running)."""
     registry, vocabulary = load_registry(), Vocabulary.load()
     plans = []
     for chapter in chapters:
@@ -130,6 +133,9 @@ def plan(chapters: list[str]) -> list[StudyPlan]:
             size = registry.get(d.key, {}).get("size")
             if d.study and size:
                 sizes.setdefault(d.study, set()).add(int(size))
+        fixed_sizes = getattr(load_chapter(chapter), "stored_sizes", None)
+        for study, size in (fixed_sizes(settings) if fixed_sizes else {}).items():
+            sizes.setdefault(study, set()).add(int(size))   # a size the chapter fixes itself
         for study in list(sizes):          # the exact posterior of its records, same sizes
             posterior = posterior_study(chapter, study)
             if posterior is not None:
@@ -266,6 +272,18 @@ def affordable(rows, chapter: str, study: str, root: Path = DECISIVE_DIR):
     return rows if allowed is None or len(rows) <= allowed else first_records(rows, allowed)
 
 
+def stored_rows(chapter: str, study: str, settings: Any, root: Path = DECISIVE_DIR
+                ) -> pd.DataFrame | None:
+    """The stored rows of ``study`` under ``settings`` (the share the budget paid for, sorted
+    by seed, without the ``commit`` column), or None where the store holds none for them: a
+    page's figure from evidence its own run cannot afford, at the settings it was stored at."""
+    rows = affordable(EvidenceStore(root).read(RecordStudy(chapter, study, rows=None), settings),
+                      chapter, study, root)
+    if not len(rows):
+        return None
+    return rows.drop(columns="commit", errors="ignore").sort_values("seed").reset_index(drop=True)
+
+
 def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
     """Each sampled declared row's decision on the stored evidence alone: its first registered
     size of records (the records the default book decides it on); rows whose study holds fewer
@@ -361,5 +379,5 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 __all__ = ["ALLOCATION_FILE", "CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan",
            "affordable", "allocate_sizes", "allocated_size", "write_allocation",
            "chapter_studies",
-           "check_provenance", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
+           "check_provenance", "stored_rows", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

@@ -4,11 +4,17 @@ residual tests (cusum, chi2), two detectors that do not know the fault (glr, bay
 oracle that does, at thresholds for hours between false alarms, on a ladder of sensors.
 
 ``SPEC``, its ``Settings``, ``validate(settings)`` and ``run(settings, progress=None)`` are what
-the pipeline needs; the package's modules are the appendix's parts (``experiment`` is the whole
+the pipeline needs, with ``STUDIES`` (the stored fault-free running) and ``stored_sizes(settings)``
+(its size); the package's modules are the appendix's parts (``experiment`` is the whole
 computation, ``figures`` and ``tables`` draw from its result).
 """
 
-from railpaper.experiments.suspension_fault_detection.experiment import run, validate
+from railpaper.experiments.suspension_fault_detection.experiment import (
+    STUDIES,
+    run,
+    stored_sizes,
+    validate,
+)
 from railpaper.experiments.suspension_fault_detection.spec import SPEC, Settings
 
-__all__ = ["SPEC", "Settings", "run", "validate"]
+__all__ = ["SPEC", "STUDIES", "Settings", "run", "stored_sizes", "validate"]

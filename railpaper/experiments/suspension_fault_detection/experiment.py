@@ -29,6 +29,7 @@ import pandas as pd
 
 from railpaper.experiments.base import ParameterError, check_sample_time, default_progress
 from railpaper.experiments.lateral_vehicle import filter_system, vehicle
+from railpaper.experiments.records import RecordStudy
 from railpaper.experiments.suspension_fault_detection import detectors, faults, records
 from railpaper.experiments.suspension_fault_detection.evidence import (
     detector_outcomes,
@@ -52,6 +53,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     Settings,
 )
 from railpaper.models import lateral_16state
+from railpaper.monitoring import block_maxima, running_for_power
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
 
@@ -366,6 +368,87 @@ def _run(settings: Settings, progress) -> FaultDetectionResult:
                                     for j, f in zip(bank.parameter, bank.factor)))
 
 
+#: First seed of the stored fault-free running: far from the run's fault and fault-free records
+#: (seed … seed + 899) and from the pilot seeds of the decisive pipeline (900 000 on).
+RUNNING_SEED_OFFSET = 100_000
+#: The mean time between false alarms, h, at which the stored running checks the tail model
+#: with the power :func:`running_records` asks for (its other checks ride along).
+RUNNING_POWER_CHECK_H = 0.1
+
+
+def monitored_s(settings: Settings) -> float:
+    """Fault-free running a full record adds to the false-alarm count, s: the complete
+    ``false_alarm_block_s`` blocks of its monitoring window (from the prior's first fault time)."""
+    _, fault_settings = faults.catalogue()
+    first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
+    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    steps = int(round(settings.duration_s / settings.dt_s))
+    return (steps - first_row) // block_rows * block_rows * settings.dt_s
+
+
+def running_records(settings: Settings) -> int:
+    """Size of the stored fault-free running, fixed before it ran: the fewest records per speed
+    whose alarm count at a threshold set for :data:`RUNNING_POWER_CHECK_H` hours finds twice
+    the alarms the tail model predicts with power 0.8 (one-sided Poisson test at 5 %,
+    :func:`railpaper.monitoring.running_for_power`): 1088 records, 0.91 h, at the defaults."""
+    return running_for_power(RUNNING_POWER_CHECK_H, monitored_s(settings))
+
+
+def first_running_seed(settings: Settings) -> int:
+    """The stored running's first seed: ``seed`` + :data:`RUNNING_SEED_OFFSET`."""
+    return settings.seed + RUNNING_SEED_OFFSET
+
+
+def running_rows(settings: Settings, seeds) -> pd.DataFrame:
+    """The stored fault-free running (study ``fault_free_running``): per seed and speed, one
+    fault-free record with every detector run on it as in the chapter's run, kept as the
+    maxima of its statistics over the ``false_alarm_block_s`` blocks of the monitoring window
+    (``block_max_<detector>_<speed>_<i>``, NaN for a block the record did not reach), its
+    running (``running_s_<speed>``, s) and whether it was cut at flange contact."""
+    fixed, theta = vehicle()
+    _, fault_settings = faults.catalogue()
+    chosen = chosen_faults(settings)
+    _, values = detectors.oracle_hypotheses(chosen, theta)
+    bank = detectors.bank_hypotheses(theta, faults.bayes_factors())
+    first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
+    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    blocks = (int(round(settings.duration_s / settings.dt_s)) - first_row) // block_rows
+    rows = []
+    with one_thread():
+        for seed in seeds:
+            row = {"seed": int(seed)}
+            for speed in settings.speeds_kmh:
+                tag = speed_key(speed)
+                run_, _ = run_record(settings, fault_settings, fixed, theta, None, "running",
+                                     speed, int(seed), values, bank)
+                for detector in DETECTORS:
+                    maxima = block_maxima(run_.statistics[detector], first_row, block_rows)
+                    for i in range(blocks):
+                        row[f"block_max_{detector}_{tag}_{i}"] = (
+                            float(maxima[i]) if i < maxima.size else np.nan)
+                row[f"running_s_{tag}"] = float(min(blocks, maxima.size) * block_rows
+                                                * settings.dt_s)
+                row[f"flange_contact_{tag}"] = bool(run_.flange_contact)
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+#: Long fault-free running, beyond what the book's run can afford: computed once into the
+#: stored evidence (``railpaper evidence --decisive suspension-fault-detection``), read by the
+#: page through :func:`railpaper.pipeline.decisive.stored_rows`.
+FAULT_FREE_RUNNING = RecordStudy(
+    "suspension-fault-detection", "fault_free_running", running_rows, chunk_records=8,
+    first_record=first_running_seed)
+#: The appendix's per-record studies.
+STUDIES = (FAULT_FREE_RUNNING,)
+
+
+def stored_sizes(settings: Settings) -> dict[str, int]:
+    """Records of each stored study the decisive run computes (no declared rows decide this
+    appendix; its sizes are fixed here by :func:`running_records`)."""
+    return {FAULT_FREE_RUNNING.name: running_records(settings)}
+
+
 def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
     """The illustrated record's statistics, one row per sample."""
     run_ = ill.run
@@ -377,5 +460,6 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
     return out
 
 
-__all__ = ["LADDER_KEPT", "chosen_faults", "ladder", "plan", "run", "run_record", "validate",
-           "window_steps"]
+__all__ = ["FAULT_FREE_RUNNING", "LADDER_KEPT", "RUNNING_POWER_CHECK_H", "RUNNING_SEED_OFFSET",
+           "STUDIES", "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan", "run", "run_record",
+           "running_records", "running_rows", "stored_sizes", "validate", "window_steps"]
