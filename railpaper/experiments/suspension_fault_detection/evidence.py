@@ -23,7 +23,15 @@ Definitions (times in s from the record's start):
   fifth of the block maxima (:func:`railpaper.monitoring.fit_exponential_tail`, one alarm per
   exceeding block) and solved for T; the tail is checked on the evaluation records at the
   shortest mean time they resolve (:func:`tail_check`) — far short of T, so the thresholds at
-  T are the tail model's extrapolation, not a measurement.
+  T are the tail model's extrapolation, not a measurement;
+* *the tail checked on long running* (:func:`long_running_check`, the stored evidence's
+  fault-free running, about an hour per speed): at the thresholds the run's tail sets for
+  :data:`RUNNING_CHECK_H` hours, the exceeding blocks counted against the count the tail
+  predicts.  The rule, fixed before the running was computed: a check is *consistent* when
+  the two-sided Poisson p-value of the count is at least 0.05, else *more alarms* or *fewer
+  alarms* than predicted; the check at 0.1 h is the one the running was sized for (power 0.8
+  against twice the predicted alarms), the others are read beside it and are not independent
+  of it (their counts are nested).
 """
 
 from __future__ import annotations
@@ -37,10 +45,12 @@ from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
     CensoredMedian,
+    LongRunningCheck,
     RecordRun,
     speed_key,
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
+    DETECTORS,
     MTBFA_CURVE_H,
     MTBFA_TARGETS_H,
     WITHIN_S,
@@ -489,6 +499,85 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
-__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median", "delay_curve_rows",
-           "evidence", "false_alarm_tail", "isolation_metrics", "operating_point_metrics",
-           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]
+#: Mean times between false alarms at which the long running checks each tail model, h (an
+#: hour of running counts about 100, 33, 10, 3 and 1 alarms at them).
+RUNNING_CHECK_H = (0.01, 0.03, 0.1, 0.3, 1.0)
+#: The p-value below which a check of the tail on the long running is not consistent.
+RUNNING_CHECK_LEVEL = 0.05
+
+
+def tail_of(metrics: dict, tag: str, block_s: float) -> ExponentialTail | None:
+    """The run's false-alarm tail of ``tag`` (``<detector>_<speed>``) from its metrics
+    (``tail_level_``, ``tail_scale_``, ``tail_exceed_``, ``tail_blocks_``); None without one."""
+    if f"tail_level_{tag}" not in metrics:
+        return None
+    return ExponentialTail(level=metrics[f"tail_level_{tag}"], scale=metrics[f"tail_scale_{tag}"],
+                           exceed=metrics[f"tail_exceed_{tag}"],
+                           blocks=int(metrics[f"tail_blocks_{tag}"]), block_s=block_s)
+
+
+def poisson_check(alarms: int, expected: float, running_h: float) -> dict:
+    """A count of ``alarms`` exceeding blocks where ``expected`` were predicted, in
+    ``running_h`` hours: the mean time between false alarms measured with its exact 95 %
+    Poisson interval (h; inf without an alarm / as the upper end), the two-sided p-value and
+    the outcome of the rule in this module's docstring."""
+    low_rate = poisson_distribution_chi2.ppf(0.025, 2 * alarms) / 2.0 if alarms else 0.0
+    high_rate = poisson_distribution_chi2.ppf(0.975, 2 * (alarms + 1)) / 2.0
+    p = min(1.0, 2.0 * min(poisson_distribution.cdf(alarms, expected),
+                           poisson_distribution.sf(alarms - 1, expected)))
+    outcome = ("consistent" if p >= RUNNING_CHECK_LEVEL else
+               "more alarms" if alarms > expected else "fewer alarms")
+    return {"alarms": int(alarms), "expected_alarms": expected,
+            "mtbfa_direct_h": running_h / alarms if alarms else np.inf,
+            "mtbfa_low_h": running_h / high_rate,
+            "mtbfa_high_h": running_h / low_rate if alarms else np.inf,
+            "p_value": p, "outcome": outcome}
+
+
+def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings
+                       ) -> LongRunningCheck:
+    """Each detector's tail model of the run (``metrics``) against the stored fault-free
+    running ``rows`` (:func:`~railpaper.experiments.suspension_fault_detection.experiment.
+    running_rows`): the checks at :data:`RUNNING_CHECK_H` (those at or above the tail's
+    level) and the same tail model refitted to the running (:class:`LongRunningCheck`)."""
+    block_s = settings.false_alarm_block_s
+    maxima, checks, refits, running_h, contacts = {}, [], [], {}, {}
+    for speed in settings.speeds_kmh:
+        key = speed_key(speed)
+        running_h[speed] = float(rows[f"running_s_{key}"].sum()) / SECONDS_PER_HOUR
+        contacts[speed] = int(rows[f"flange_contact_{key}"].sum())
+        for detector in DETECTORS:
+            columns = [c for c in rows.columns if c.startswith(f"block_max_{detector}_{key}_")]
+            values = rows[columns].to_numpy(float).ravel()
+            values = np.sort(values[np.isfinite(values)])[::-1]
+            maxima[(detector, speed)] = values
+            tail = tail_of(metrics, f"{detector}_{key}", block_s)
+            if tail is None or not values.size:
+                continue
+            for mtbfa_h in RUNNING_CHECK_H:
+                if mtbfa_h < tail.mtbfa_h(tail.level):
+                    continue
+                h = tail.threshold(mtbfa_h)
+                checks.append({"speed_kmh": speed, "detector": detector, "mtbfa_h": mtbfa_h,
+                               "threshold": h,
+                               **poisson_check(int(np.sum(values > h)),
+                                               running_h[speed] / mtbfa_h, running_h[speed])})
+            try:
+                again = fit_exponential_tail(values, block_s)
+            except ValueError:                 # too few blocks, or a tail without spread
+                continue
+            for mtbfa_h in MTBFA_TARGETS_H:
+                h = tail.threshold(mtbfa_h)
+                refits.append({"speed_kmh": speed, "detector": detector, "mtbfa_h": mtbfa_h,
+                               "threshold": h, "threshold_running": again.threshold(mtbfa_h),
+                               "mtbfa_h_of_run_threshold": (again.mtbfa_h(h) if h >= again.level
+                                                            else np.nan)})
+    return LongRunningCheck(records=len(rows), running_h=running_h, flange_contacts=contacts,
+                            block_s=block_s, maxima=maxima, checks=pd.DataFrame(checks),
+                            refits=pd.DataFrame(refits))
+
+
+__all__ = ["BLAMING", "RUNNING_CHECK_H", "RUNNING_CHECK_LEVEL", "TAIL_RESAMPLES", "blame_metrics",
+           "censored_median", "delay_curve_rows", "evidence", "false_alarm_tail",
+           "isolation_metrics", "long_running_check", "operating_point_metrics", "poisson_check",
+           "tail_check", "tail_intervals", "tail_of", "threshold", "watched_h", "window_rows"]

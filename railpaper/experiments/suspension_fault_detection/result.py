@@ -174,6 +174,47 @@ class IllustratedRecord:
     value_posterior: dict[str, float]
 
 
+@dataclass(frozen=True)
+class LongRunningCheck:
+    """The tail model of each detector's false alarms against long fault-free running (the
+    stored evidence's ``fault_free_running``), per speed and detector.
+
+    Attributes
+    ----------
+    records : int
+        Fault-free records per speed.
+    running_h : dict of float to float
+        Speed (km/h) → running watched, h (whole blocks of the monitoring windows).
+    flange_contacts : dict of float to int
+        Speed → fault-free records cut at flange contact.
+    block_s : float
+        Length of a block, s (one alarm per exceeding block).
+    maxima : dict of (str, float) to ndarray
+        (detector, speed) → every block's maximum of its statistic, largest first.
+    checks : pandas.DataFrame
+        One row per (speed_kmh, detector, mtbfa_h): the run's tail threshold for ``mtbfa_h``
+        hours, the alarms the tail predicts in the running (``expected_alarms``), the blocks
+        that exceed it (``alarms``), the mean time between false alarms measured
+        (``mtbfa_direct_h``, inf without an alarm) with its exact 95 % Poisson interval
+        (``mtbfa_low_h``, ``mtbfa_high_h``), the two-sided Poisson p-value of the count and
+        the check's ``outcome``: ``consistent`` (p ≥ 0.05), ``more alarms`` or ``fewer
+        alarms`` than the tail predicts.
+    refits : pandas.DataFrame
+        One row per (speed_kmh, detector, mtbfa_h) of the run's operating points: the run's
+        threshold, the threshold the same tail model fitted to the long running gives
+        (``threshold_running``), and the mean time between false alarms that tail gives the
+        run's threshold (``mtbfa_h_of_run_threshold``).
+    """
+
+    records: int
+    running_h: dict[float, float]
+    flange_contacts: dict[float, int]
+    block_s: float
+    maxima: dict[tuple[str, float], np.ndarray]
+    checks: pd.DataFrame
+    refits: pd.DataFrame
+
+
 @dataclass
 class FaultDetectionResult(ChapterResult):
     """A run of the appendix: :class:`ChapterResult` plus
@@ -234,4 +275,4 @@ class FaultDetectionResult(ChapterResult):
 
 
 __all__ = ["NO_FAULT", "CensoredMedian", "Fault", "FaultDetectionResult", "IllustratedRecord",
-           "RecordRun", "read_censored_median", "speed_key"]
+           "LongRunningCheck", "RecordRun", "read_censored_median", "speed_key"]
