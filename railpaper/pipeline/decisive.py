@@ -284,6 +284,19 @@ def stored_rows(chapter: str, study: str, settings: Any, root: Path = DECISIVE_D
     return rows.drop(columns="commit", errors="ignore").sort_values("seed").reset_index(drop=True)
 
 
+def stored_provenance(chapter: str, study: str, root: Path = DECISIVE_DIR) -> dict[str, Any]:
+    """What the stored ``study`` of ``chapter`` cost and where it came from: its entry of
+    ``provenance.json`` (``records``, ``seeds``, ``cpu_s``, ``wall_s``, ``workers``) with the
+    run's ``commit`` and ``date``; empty where nothing is stored."""
+    path = Path(root) / chapter / "provenance.json"
+    if not path.exists():
+        return {}
+    record = json.loads(path.read_text())
+    entry = record.get("studies", {}).get(study)
+    return {} if entry is None else {**entry, "commit": record.get("commit", ""),
+                                     "date": record.get("date", "")}
+
+
 def stored_verdicts(chapter: str, root: Path = DECISIVE_DIR) -> dict[str, dict[str, Any]]:
     """Each sampled declared row's decision on the stored evidence alone: its first registered
     size of records (the records the default book decides it on); rows whose study holds fewer
@@ -379,5 +392,5 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 __all__ = ["ALLOCATION_FILE", "CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan",
            "affordable", "allocate_sizes", "allocated_size", "write_allocation",
            "chapter_studies",
-           "check_provenance", "stored_rows", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
+           "check_provenance", "stored_provenance", "stored_rows", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
            "register_chapter", "run_decisive"]

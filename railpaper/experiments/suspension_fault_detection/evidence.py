@@ -48,11 +48,15 @@ from railpaper.experiments.suspension_fault_detection.result import (
     LongRunningCheck,
     RecordRun,
     speed_key,
+    tail_of,
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
     MTBFA_CURVE_H,
     MTBFA_TARGETS_H,
+    OPERATING_POINT_H,
+    RUNNING_CHECK_H,
+    RUNNING_CHECK_LEVEL,
     WITHIN_S,
     Settings,
 )
@@ -499,23 +503,6 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
-#: Mean times between false alarms at which the long running checks each tail model, h (an
-#: hour of running counts about 100, 33, 10, 3 and 1 alarms at them).
-RUNNING_CHECK_H = (0.01, 0.03, 0.1, 0.3, 1.0)
-#: The p-value below which a check of the tail on the long running is not consistent.
-RUNNING_CHECK_LEVEL = 0.05
-
-
-def tail_of(metrics: dict, tag: str, block_s: float) -> ExponentialTail | None:
-    """The run's false-alarm tail of ``tag`` (``<detector>_<speed>``) from its metrics
-    (``tail_level_``, ``tail_scale_``, ``tail_exceed_``, ``tail_blocks_``); None without one."""
-    if f"tail_level_{tag}" not in metrics:
-        return None
-    return ExponentialTail(level=metrics[f"tail_level_{tag}"], scale=metrics[f"tail_scale_{tag}"],
-                           exceed=metrics[f"tail_exceed_{tag}"],
-                           blocks=int(metrics[f"tail_blocks_{tag}"]), block_s=block_s)
-
-
 def poisson_check(alarms: int, expected: float, running_h: float) -> dict:
     """A count of ``alarms`` exceeding blocks where ``expected`` were predicted, in
     ``running_h`` hours: the mean time between false alarms measured with its exact 95 %
@@ -534,14 +521,18 @@ def poisson_check(alarms: int, expected: float, running_h: float) -> dict:
             "p_value": p, "outcome": outcome}
 
 
-def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings
+def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings,
+                       runs: tuple[RecordRun, ...] = (), monitor_from_s: float = 0.0
                        ) -> LongRunningCheck:
     """Each detector's tail model of the run (``metrics``) against the stored fault-free
     running ``rows`` (:func:`~railpaper.experiments.suspension_fault_detection.experiment.
     running_rows`): the checks at :data:`RUNNING_CHECK_H` (those at or above the tail's
-    level) and the same tail model refitted to the running (:class:`LongRunningCheck`)."""
+    level), the same tail model refitted to the running, and, given the run's records
+    ``runs`` (watched from ``monitor_from_s``), each fault's delays at the thresholds for
+    :data:`OPERATING_POINT_H` hours of both tails (:class:`LongRunningCheck`)."""
     block_s = settings.false_alarm_block_s
-    maxima, checks, refits, running_h, contacts = {}, [], [], {}, {}
+    first_row = window_rows(settings.dt_s, monitor_from_s)
+    maxima, checks, refits, running_h, contacts, delays = {}, [], [], {}, {}, []
     for speed in settings.speeds_kmh:
         key = speed_key(speed)
         running_h[speed] = float(rows[f"running_s_{key}"].sum()) / SECONDS_PER_HOUR
@@ -572,12 +563,26 @@ def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings
                                "threshold": h, "threshold_running": again.threshold(mtbfa_h),
                                "mtbfa_h_of_run_threshold": (again.mtbfa_h(h) if h >= again.level
                                                             else np.nan)})
+            faulty = {}
+            for r in runs:
+                if r.speed_kmh == speed and r.fault != NO_FAULT and detector in r.statistics:
+                    faulty.setdefault(r.fault, []).append(r)
+            for fault, of_fault in faulty.items():
+                row = {"speed_kmh": speed, "detector": detector, "fault": fault}
+                for name, h in (("run", tail.threshold(OPERATING_POINT_H)),
+                                ("running", again.threshold(OPERATING_POINT_H))):
+                    m = survival_delay_metrics(detector_outcomes(of_fault, detector, h,
+                                                                 first_row, settings.dt_s), "x")
+                    row[f"km_delay_median_s_{name}"] = m.get("km_delay_median_s_x", np.nan)
+                    row[f"km_detected_within_2s_{name}"] = m.get("km_detected_within_2s_x",
+                                                                 np.nan)
+                delays.append(row)
     return LongRunningCheck(records=len(rows), running_h=running_h, flange_contacts=contacts,
                             block_s=block_s, maxima=maxima, checks=pd.DataFrame(checks),
-                            refits=pd.DataFrame(refits))
+                            refits=pd.DataFrame(refits), delays=pd.DataFrame(delays))
 
 
-__all__ = ["BLAMING", "RUNNING_CHECK_H", "RUNNING_CHECK_LEVEL", "TAIL_RESAMPLES", "blame_metrics",
+__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics",
            "censored_median", "delay_curve_rows", "evidence", "false_alarm_tail",
            "isolation_metrics", "long_running_check", "operating_point_metrics", "poisson_check",
-           "tail_check", "tail_intervals", "tail_of", "threshold", "watched_h", "window_rows"]
+           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

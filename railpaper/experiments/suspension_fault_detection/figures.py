@@ -17,8 +17,10 @@ from matplotlib.patches import Patch
 from railpaper.experiments.display import number
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
+    LongRunningCheck,
     read_censored_median,
     speed_key,
+    tail_of,
 )
 from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
@@ -32,6 +34,7 @@ from railpaper.experiments.suspension_fault_detection.tables import (
     PARAMETERS,
     fault_short_label,
 )
+from railpaper.monitoring import fit_exponential_tail
 
 #: Colour and marker of each detector.
 DETECTOR_STYLES = {"cusum": ("C0", "o"), "chi2": ("C1", "v"), "glr": ("C4", "^"),
@@ -322,6 +325,74 @@ def ladder_figure(result, settings: Settings):
     labels.append("at the ideal rung's thresholds")
     fig.suptitle(f"{settings.ladder_speed_kmh:g} km/h, thresholds for {LADDER_MTBFA_H:g} h "
                  "between false alarms on each rung", fontsize=9)
+    fig.tight_layout()
+    _legend_below(fig, handles, labels, ncol=3)
+    return fig
+
+
+#: Colour of a check of the tail on the long running, by outcome.
+OUTCOME_STYLES = {"consistent": ("k", "o"), "more alarms": ("C3", "^"),
+                  "fewer alarms": ("C0", "v")}
+
+
+def long_running_figure(check: LongRunningCheck, result, settings: Settings):
+    """Each detector's mean time between false alarms against its threshold (panels: speeds in
+    rows, detectors in columns): measured on the stored long running (a step per exceeding
+    block: k blocks above the threshold, running / k), the run's tail model (solid) and the
+    same tail refitted to the running (dashed), the checks at the run's thresholds for
+    :data:`RUNNING_CHECK_H` hours with their 95 % Poisson intervals (coloured by outcome), and
+    the running measured (dotted)."""
+    speeds = list(check.running_h)
+    fig, axes = plt.subplots(len(speeds), len(DETECTORS), figsize=(7, 1.9 * len(speeds) + 0.9),
+                             squeeze=False, sharey=True)
+    for i, speed in enumerate(speeds):
+        running_h = check.running_h[speed]
+        for j, det in enumerate(DETECTORS):
+            ax = axes[i, j]
+            maxima = check.maxima.get((det, speed), np.zeros(0))
+            tail = tail_of(result.metrics, f"{det}_{speed_key(speed)}", check.block_s)
+            shown = maxima[:max(2, int(0.2 * maxima.size))]
+            if shown.size:
+                k = np.arange(1, shown.size + 1)
+                ax.step(shown, running_h / k, where="post", color="k", lw=0.8)
+            if tail is not None:
+                h = np.linspace(tail.level, tail.threshold(MTBFA_TARGETS_H[-1]), 60)
+                ax.plot(h, [tail.mtbfa_h(x) for x in h], color=DETECTOR_STYLES[det][0],
+                        lw=1.2)
+            if shown.size > 2:
+                try:
+                    again = fit_exponential_tail(maxima, check.block_s)
+                    h = np.linspace(again.level, again.threshold(MTBFA_TARGETS_H[-1]), 60)
+                    ax.plot(h, [again.mtbfa_h(x) for x in h], color="0.4", lw=1.0, ls="--")
+                except ValueError:
+                    pass
+            rows = check.checks[(check.checks["speed_kmh"] == speed)
+                                & (check.checks["detector"] == det)]
+            for row in rows.itertuples():
+                value = row.mtbfa_direct_h if np.isfinite(row.mtbfa_direct_h) else running_h
+                high = row.mtbfa_high_h if np.isfinite(row.mtbfa_high_h) else 10 * running_h
+                ax.errorbar([row.threshold], [value], yerr=[[value - row.mtbfa_low_h],
+                                                            [high - value]],
+                            fmt=OUTCOME_STYLES[row.outcome][1], ms=3,
+                            color=OUTCOME_STYLES[row.outcome][0], lw=0.8)
+            ax.axhline(running_h, color="0.5", lw=0.8, ls=":")
+            ax.set_yscale("log")
+            ax.tick_params(labelsize=6)
+            if i == 0:
+                ax.set_title(DETECTOR_SHORT[det], fontsize=8)
+            if j == 0:
+                ax.set_ylabel(f"{speed:g} km/h\nMTBFA (h)", fontsize=8)
+            if i == len(speeds) - 1:
+                ax.set_xlabel("threshold", fontsize=7)
+    axes[0, 0].set_ylim(1e-4, 3e3)
+    handles = [Line2D([], [], color="k", lw=0.8), Line2D([], [], color="C7", lw=1.2),
+               Line2D([], [], color="0.4", lw=1.0, ls="--"),
+               Line2D([], [], color="0.5", lw=0.8, ls=":")]
+    labels = ["measured on the stored running", "tail model of the run (detector's colour)",
+              "tail refitted to the running", "running measured"]
+    for outcome, (colour, marker) in OUTCOME_STYLES.items():
+        handles.append(Line2D([], [], color=colour, marker=marker, ms=3, ls=""))
+        labels.append(f"check: {outcome}")
     fig.tight_layout()
     _legend_below(fig, handles, labels, ncol=3)
     return fig

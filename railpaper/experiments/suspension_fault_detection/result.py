@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from railpaper.experiments.base import ChapterResult
+from railpaper.monitoring import ExponentialTail
 
 #: The fault name of a fault-free record.
 NO_FAULT = "none"
@@ -174,6 +175,16 @@ class IllustratedRecord:
     value_posterior: dict[str, float]
 
 
+def tail_of(metrics: dict, tag: str, block_s: float) -> ExponentialTail | None:
+    """The run's false-alarm tail of ``tag`` (``<detector>_<speed>``) from its metrics
+    (``tail_level_``, ``tail_scale_``, ``tail_exceed_``, ``tail_blocks_``); None without one."""
+    if f"tail_level_{tag}" not in metrics:
+        return None
+    return ExponentialTail(level=metrics[f"tail_level_{tag}"], scale=metrics[f"tail_scale_{tag}"],
+                           exceed=metrics[f"tail_exceed_{tag}"],
+                           blocks=int(metrics[f"tail_blocks_{tag}"]), block_s=block_s)
+
+
 @dataclass(frozen=True)
 class LongRunningCheck:
     """The tail model of each detector's false alarms against long fault-free running (the
@@ -204,6 +215,11 @@ class LongRunningCheck:
         threshold, the threshold the same tail model fitted to the long running gives
         (``threshold_running``), and the mean time between false alarms that tail gives the
         run's threshold (``mtbfa_h_of_run_threshold``).
+    delays : pandas.DataFrame
+        One row per (speed_kmh, detector, fault) of the run's records: the Kaplan–Meier median
+        delay (s, NaN where fewer than half are detected) and the probability of detection
+        within 2 s at the threshold for ``spec.OPERATING_POINT_H`` hours (100) of the run's tail (``…_run``) and of the tail
+        refitted to the running (``…_running``).
     """
 
     records: int
@@ -213,6 +229,7 @@ class LongRunningCheck:
     maxima: dict[tuple[str, float], np.ndarray]
     checks: pd.DataFrame
     refits: pd.DataFrame
+    delays: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 @dataclass
@@ -275,4 +292,4 @@ class FaultDetectionResult(ChapterResult):
 
 
 __all__ = ["NO_FAULT", "CensoredMedian", "Fault", "FaultDetectionResult", "IllustratedRecord",
-           "LongRunningCheck", "RecordRun", "read_censored_median", "speed_key"]
+           "LongRunningCheck", "RecordRun", "read_censored_median", "speed_key", "tail_of"]

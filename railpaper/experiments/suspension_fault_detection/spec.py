@@ -103,11 +103,20 @@ LADDER = {"no_axlebox_gyro_001": ("bogie and car-body accelerometers, gyro at 0.
           "accelerometers_only": ("bogie and car-body accelerometers only",
                                   {"noise_acc_wheelset_mps2": 100.0,
                                    "noise_yawrate_radps": 10.0})}
+#: The operating point the page's delay tables read, h between false alarms.
+OPERATING_POINT_H = 100.0
 #: The ladder's operating point, h between false alarms.
-LADDER_MTBFA_H = 100.0
+LADDER_MTBFA_H = OPERATING_POINT_H
+
+#: Mean times between false alarms at which the long running checks each tail model, h (an
+#: hour of running counts about 100, 33, 10, 3 and 1 alarms at them).
+RUNNING_CHECK_H = (0.01, 0.03, 0.1, 0.3, 1.0)
+#: The p-value below which a check of the tail on the long running is not consistent.
+RUNNING_CHECK_LEVEL = 0.05
 
 #: The grid of the delay against mean time between false alarms picture, h.
 MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
 __all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
-           "MTBFA_TARGETS_H", "SPEC", "Settings", "WITHIN_S"]
+           "MTBFA_TARGETS_H", "OPERATING_POINT_H", "RUNNING_CHECK_H", "RUNNING_CHECK_LEVEL", "SPEC", "Settings",
+           "WITHIN_S"]

@@ -19,6 +19,7 @@ from railpaper.experiments.display import markdown, number
 from railpaper.experiments.suspension_fault_detection.result import (
     NO_FAULT,
     Fault,
+    LongRunningCheck,
     read_censored_median,
     speed_key,
 )
@@ -28,6 +29,8 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
+    OPERATING_POINT_H,
+    RUNNING_CHECK_H,
     WITHIN_S,
     Settings,
 )
@@ -224,6 +227,91 @@ def threshold_table(result, settings: Settings) -> str:
         f"for {t:g} h: threshold [95 %]; the mean time it gives [95 %]" for t in MTBFA_TARGETS_H]))
 
 
+#: How a check's outcome is shown in :func:`long_running_table`.
+OUTCOME_MARK = {"consistent": "", "more alarms": " **more**", "fewer alarms": " *fewer*"}
+
+
+def long_running_table(check: LongRunningCheck) -> str:
+    """Per speed and detector, each check of its tail model on the stored running (alarms
+    counted / predicted at the thresholds for each mean time, the outcome where the count
+    contradicts the tail) and the mean time between false alarms the tail refitted to the
+    running gives the run's threshold for 100 h."""
+    if not len(check.checks):
+        return "*No checks: the run has no tail model (too few calibration records).*"
+    rows = []
+    for (speed, det), group in check.checks.groupby(["speed_kmh", "detector"], sort=False):
+        cells = {}
+        for row in group.itertuples():
+            cells[row.mtbfa_h] = (f"{row.alarms} / {number(row.expected_alarms, 2)}"
+                                  + OUTCOME_MARK[row.outcome])
+        refit = check.refits[(check.refits["speed_kmh"] == speed)
+                             & (check.refits["detector"] == det)
+                             & (check.refits["mtbfa_h"] == 100.0)]
+        hours = refit["mtbfa_h_of_run_threshold"].iloc[0] if len(refit) else math.nan
+        rows.append((number(speed), DETECTOR_SHORT[det],
+                     *[cells.get(t, NONE) for t in RUNNING_CHECK_H],
+                     NONE if not math.isfinite(hours) else number(hours, 2)))
+    return markdown(pd.DataFrame(rows, columns=[
+        "speed (km/h)", "detector", *[f"alarms / predicted at {t:g} h" for t in RUNNING_CHECK_H],
+        "the '100 h' threshold under the refitted tail (h)"]))
+
+
+def running_delay_table(check: LongRunningCheck, faults: tuple[Fault, ...]) -> str:
+    """Per fault and detector, at each speed: the Kaplan–Meier median delay and the share
+    detected within 2 s at the threshold for :data:`OPERATING_POINT_H` hours of the run's tail,
+    then (→) of the tail refitted to the stored running."""
+    table = check.delays
+    if table is None or not len(table):
+        return "*No delays: the run's records were not given.*"
+    speeds = list(check.running_h)
+    rows = []
+    for fault in faults:
+        for i, det in enumerate(DETECTORS):
+            cells = []
+            for speed in speeds:
+                hit = table[(table["speed_kmh"] == speed) & (table["detector"] == det)
+                            & (table["fault"] == fault.name)]
+                if not len(hit):
+                    cells.append(NONE)
+                    continue
+                row = hit.iloc[0]
+                cells.append(
+                    f"{_median_text(row['km_delay_median_s_run'])} → "
+                    f"{_median_text(row['km_delay_median_s_running'])}; "
+                    f"{percent(row['km_detected_within_2s_run'])} → "
+                    f"{percent(row['km_detected_within_2s_running'])}")
+            rows.append((fault_short_label(fault) if i == 0 else "", DETECTOR_SHORT[det],
+                         *cells))
+    return markdown(pd.DataFrame(rows, columns=["fault", "detector"] + [
+        f"{speed:g} km/h: median delay (s); within 2 s" for speed in speeds]))
+
+
+def _median_text(value: float) -> str:
+    """A Kaplan–Meier median delay, s, or "beyond the record" (NaN: fewer than half detected)."""
+    return "beyond the record" if not math.isfinite(value) else number(value)
+
+
+def long_running_summary(check: LongRunningCheck) -> str:
+    """"3 of 50 checks contradict their tail (2 with more alarms, 1 with fewer)"."""
+    outcomes = check.checks["outcome"] if len(check.checks) else pd.Series([], dtype=str)
+    more, fewer = int((outcomes == "more alarms").sum()), int((outcomes == "fewer alarms").sum())
+    return (f"{more + fewer} of {len(outcomes)} checks contradict their tail ({more} with more "
+            f"alarms than predicted, {fewer} with fewer)")
+
+
+def long_running_outcomes(check: LongRunningCheck, mtbfa_h: float) -> str:
+    """"GLR at 200 km/h (more alarms)": the detectors and speeds whose tail the stored running
+    contradicts at the threshold for ``mtbfa_h`` hours, or "no detector"."""
+    if not len(check.checks):
+        return "no detector"
+    rows = check.checks[(check.checks["mtbfa_h"] == mtbfa_h)
+                        & (check.checks["outcome"] != "consistent")]
+    if not len(rows):
+        return "no detector"
+    return ", ".join(f"{DETECTOR_SHORT[r.detector]} at {number(r.speed_kmh)} km/h ({r.outcome})"
+                     for r in rows.itertuples())
+
+
 def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
     """"GLR and Shiryaev–Roberts at 200 km/h": the detectors and speeds whose tail model the
     evaluation records refute (two-sided Poisson p-value of its check below ``level``), or
@@ -344,5 +432,6 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
 __all__ = ["DETECTOR_SHORT", "PARAMETERS", "RUNG_SHORT", "STATISTICS", "clean", "delay_cell",
            "delay_text", "detection_table", "estimate_table", "false_alarm_table",
            "fault_free_flange_text", "fault_short_label", "faults_table", "interval_text",
-           "ladder_table", "operating_point_table", "percent", "tail_check_failures",
-           "tail_table", "threshold_table"]
+           "ladder_table", "long_running_outcomes", "long_running_summary",
+           "long_running_table", "operating_point_table", "percent", "running_delay_table",
+           "tail_check_failures", "tail_table", "threshold_table"]

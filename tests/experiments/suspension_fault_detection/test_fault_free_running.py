@@ -11,15 +11,16 @@ import pytest
 
 from railpaper.experiments.records import assert_chunk_invariant, map_in_process
 from railpaper.experiments.suspension_fault_detection import SPEC, STUDIES, stored_sizes
+from railpaper.experiments.suspension_fault_detection.evidence import (
+    long_running_check,
+    poisson_check,
+)
 from railpaper.experiments.suspension_fault_detection.experiment import (
     FAULT_FREE_RUNNING,
     RUNNING_SEED_OFFSET,
     monitored_s,
 )
-from railpaper.experiments.suspension_fault_detection.evidence import (
-    long_running_check,
-    poisson_check,
-)
+from railpaper.experiments.suspension_fault_detection.result import RecordRun
 from railpaper.monitoring import poisson_excess_power
 
 ONE_SPEED = {"speeds_kmh": [300.0]}
@@ -105,3 +106,27 @@ def test_poisson_check_outcomes_by_hand():
     assert none["outcome"] == "fewer alarms" and none["mtbfa_direct_h"] == np.inf
     assert none["mtbfa_low_h"] == pytest.approx(1.0 / (-math.log(0.025)), rel=1e-9)
     assert poisson_check(3, 5.0, 1.0)["outcome"] == "consistent"
+
+
+def test_delays_at_both_tails_thresholds_by_hand():
+    # one record of csaly_0 at 300 km/h, fault at 1.5 s; its cusum is 15 from 1.6 s and 25 from
+    # 2.0 s.  The run's threshold for 100 h is ln(360000) = 12.8 (delay 0.1 s); the tail
+    # refitted to the running of test_long_running_check_by_hand, 2 + 1.5 ln(0.2 * 360000 /
+    # 0.5) = 19.8, is first reached at 2.0 s (delay 0.5 s)
+    metrics = {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
+               "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": 100}
+    settings = SPEC.resolve(ONE_SPEED, False)
+    statistic = np.zeros(800)
+    statistic[319:] = 15.0                    # row k - 1 is the value after sample k (k dt)
+    statistic[399:] = 25.0
+    run = RecordRun(fault="csaly_0", role="fault", speed_kmh=300.0, seed=0, fault_time_s=1.5,
+                    end_s=4.0, flange_contact=False, statistics={"cusum": statistic},
+                    post_fault_estimate={}, true_factor_end=0.0)
+    nan = np.nan
+    rows = _rows([[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, nan, nan]])
+    check = long_running_check(rows, metrics, settings, (run,), monitor_from_s=1.0)
+    row = check.delays.set_index("detector").loc["cusum"]
+    assert row["fault"] == "csaly_0"
+    assert row["km_delay_median_s_run"] == pytest.approx(0.1)
+    assert row["km_delay_median_s_running"] == pytest.approx(0.5)
+    assert row["km_detected_within_2s_run"] == row["km_detected_within_2s_running"] == 1.0
