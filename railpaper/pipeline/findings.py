@@ -113,10 +113,21 @@ def verdicts_over_bands(row: dict, bands: dict[str, tuple[float, float]]) -> set
     return out
 
 
+#: The verdict of a finding whose statistic this run did not compute (a speed, fault or
+#: detector the user's parameters left out).
+NOT_IN_RUN = "not in this run"
+
+
 def judged(chapter: str, metrics: dict) -> list[dict]:
-    """Each finding in force with this run's statistic, interval, sample size and verdict."""
+    """Each finding in force with this run's statistic, interval, sample size and verdict
+    (:data:`NOT_IN_RUN`, with no numbers, where the run lacks one of its metrics)."""
     out = []
     for key, row in in_force(chapter).items():
+        needed = [row["metric"], *row["interval"], row["n_samples"]]
+        if any(m not in metrics for m in needed):
+            out.append(dict(row, key=key, value=None, low=None, high=None, n=None,
+                            verdict=NOT_IN_RUN))
+            continue
         low, high = (metrics[m] for m in row["interval"])
         n = metrics[row["n_samples"]]
         out.append(dict(row, key=key, value=metrics[row["metric"]], low=low, high=high, n=n,
@@ -132,6 +143,11 @@ def findings_markdown(chapter: str, metrics: dict) -> str:
     for f in judged(chapter, metrics):
         unit = f" {f['unit']}" if f.get("unit") else ""
         word = "more than" if f["side"] == "above" else "less than"
+        if f["verdict"] == NOT_IN_RUN:
+            lines.append(f"| {f['finding']} | {word} {f['threshold']:g}{unit} | — (its speed, "
+                         f"fault or detector is not in this run's parameters) | "
+                         f"*{NOT_IN_RUN}* |")
+            continue
         needs = (f" (needs {f['min_samples']:g} records to be decided)"
                  if f["n"] < f.get("min_samples", 0) else "")
         lines.append(f"| {f['finding']} | {word} {f['threshold']:g}{unit} | "
@@ -151,5 +167,5 @@ def findings_markdown(chapter: str, metrics: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["FINDING_VERDICTS", "findings_markdown", "in_force", "judged", "read_findings",
+__all__ = ["FINDING_VERDICTS", "NOT_IN_RUN", "findings_markdown", "in_force", "judged", "read_findings",
            "verdict", "verdicts_over_bands"]

@@ -90,6 +90,22 @@ def test_retired_findings_and_notes_go_below_the_table(tmp_path, monkeypatch):
         findings.read_findings("x")
 
 
+def test_a_finding_whose_metrics_the_run_lacks_is_not_in_this_run(tmp_path, monkeypatch):
+    """A run with other speeds (no metric of the finding) gets a row that says so, not a
+    KeyError; a run with the metrics is judged as before."""
+    import railpaper.pipeline.findings as findings
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "findings.toml").write_text(
+        '[f]\nfinding = "at 300 km/h"\nmetric = "m_300"\ninterval = ["l_300", "h_300"]\n'
+        'n_samples = "n_300"\nthreshold = 0.5\nside = "above"\n')
+    monkeypatch.setattr(findings, "chapter_data_dir", lambda chapter: tmp_path / chapter)
+    absent = findings.judged("x", {"m_250": 0.8})
+    assert [f["verdict"] for f in absent] == [findings.NOT_IN_RUN] and absent[0]["value"] is None
+    assert "*not in this run*" in findings.findings_markdown("x", {"m_250": 0.8})
+    present = findings.judged("x", {"m_300": 0.8, "l_300": 0.6, "h_300": 0.9, "n_300": 20})
+    assert [f["verdict"] for f in present] == ["holds"]
+
+
 def test_an_operating_point_must_be_the_metrics_own(tmp_path, monkeypatch):
     """A finding at 100 h between false alarms reads metrics at 100 h (``_at_100h`` in the
     statistic, its interval's ends and its count), or is refused in one line."""

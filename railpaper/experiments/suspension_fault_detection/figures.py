@@ -335,6 +335,16 @@ OUTCOME_STYLES = {"consistent": ("k", "o"), "more alarms": ("C3", "^"),
                   "fewer alarms": ("C0", "v")}
 
 
+def no_stored_running_figure():
+    """What the page shows in place of :func:`long_running_figure` when the store holds no
+    running for the run's settings (it holds the defaults' only)."""
+    fig, ax = plt.subplots(figsize=(7, 1.0))
+    ax.axis("off")
+    ax.text(0.5, 0.5, "No stored fault-free running for these settings (the store holds the "
+            "appendix's defaults only)", ha="center", va="center", fontsize=9)
+    return fig
+
+
 def long_running_figure(check: LongRunningCheck, result, settings: Settings):
     """Each detector's mean time between false alarms against its threshold (panels: speeds in
     rows, detectors in columns): measured on the stored long running (a step per exceeding
