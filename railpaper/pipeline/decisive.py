@@ -390,7 +390,7 @@ def check_provenance(chapter: str, root: Path = DECISIVE_DIR) -> list[str]:
 
 
 __all__ = ["ALLOCATION_FILE", "CPU_BUDGET_S", "DECISIVE_DIR", "PILOT_SEED", "StudyPlan",
-           "affordable", "allocate_sizes", "allocated_size", "write_allocation",
-           "chapter_studies",
-           "check_provenance", "stored_provenance", "stored_rows", "stored_verdicts", "write_stored_verdicts", "pilot_sigma", "plan",
-           "register_chapter", "run_decisive"]
+           "affordable", "allocate_sizes", "allocated_size", "chapter_studies",
+           "check_provenance", "pilot_sigma", "plan", "register_chapter", "run_decisive",
+           "stored_provenance", "stored_rows", "stored_verdicts", "write_allocation",
+           "write_stored_verdicts"]

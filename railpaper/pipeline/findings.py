@@ -167,5 +167,5 @@ def findings_markdown(chapter: str, metrics: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["FINDING_VERDICTS", "NOT_IN_RUN", "findings_markdown", "in_force", "judged", "read_findings",
-           "verdict", "verdicts_over_bands"]
+__all__ = ["FINDING_VERDICTS", "NOT_IN_RUN", "findings_markdown", "in_force", "judged",
+           "read_findings", "verdict", "verdicts_over_bands"]

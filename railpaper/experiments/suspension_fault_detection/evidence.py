@@ -55,6 +55,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     MTBFA_CURVE_H,
     MTBFA_TARGETS_H,
     OPERATING_POINT_H,
+    PAIRS,
     RUNNING_CHECK_H,
     RUNNING_CHECK_LEVEL,
     WITHIN_S,
@@ -429,6 +430,43 @@ def delay_curve_rows(tail: ExponentialTail, runs_of: dict, detector: str, first_
     return rows
 
 
+def paired_metrics(delay_a: np.ndarray, delay_b: np.ndarray, tag: str) -> dict:
+    """Two detectors on the same records (delays, inf where a record is not detected):
+    ``paired_earlier_<tag>`` and ``paired_later_<tag>``, the share of records on which A's
+    delay is shorter (longer) than B's, each with its Clopper–Pearson interval (the rest are
+    ties, both undetected among them), and over the records both detect the median of
+    B's delay − A's (``paired_difference_median_s_<tag>``, distribution-free interval;
+    ``paired_both_detected_<tag>`` records)."""
+    a, b = np.asarray(delay_a, float), np.asarray(delay_b, float)
+    m = {}
+    m.update(rate(a < b).metrics(f"paired_earlier_{tag}"))
+    m.update(rate(a > b).metrics(f"paired_later_{tag}"))
+    both = np.isfinite(a) & np.isfinite(b)
+    m[f"paired_both_detected_{tag}"] = int(both.sum())
+    if both.any():
+        m.update(median_interval(b[both] - a[both]).metrics(
+            f"paired_difference_median_s_{tag}"))
+    return m
+
+
+def paired_comparisons(tails: dict, runs_of: dict, first_row: int, dt_s: float,
+                       speed_tag: str) -> dict:
+    """:func:`paired_metrics` of every pair of :data:`~.spec.PAIRS` with both tails, per fault, at
+    each detector's threshold for :data:`OPERATING_POINT_H` hours
+    (``…_<A>_vs_<B>_<fault>_<speed>_at_<T>h``)."""
+    m = {}
+    for a, b in PAIRS:
+        if a not in tails or b not in tails:
+            continue
+        for fault, runs in runs_of.items():
+            delays = [detector_outcomes(runs, d, tails[d].threshold(OPERATING_POINT_H),
+                                        first_row, dt_s)["delay_s"].to_numpy(float)
+                      for d in (a, b)]
+            m.update(paired_metrics(*delays, f"{a}_vs_{b}_{fault}_{speed_tag}"
+                                             f"_at_{OPERATING_POINT_H:g}h"))
+    return m
+
+
 def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float, ...],
              faults: list[str], settings: Settings, dt_s: float, monitor_from_s: float,
              hypothesis_parameter: np.ndarray | None = None,
@@ -454,6 +492,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
         free = [r for r in at if r.fault == NO_FAULT]
         if free:
             metrics.update(fault_free_flange_metrics(free, speed_key(speed)))
+        tails, faulty = {}, {}
         for detector in detectors:
             have = [r for r in at if detector in r.statistics]
             calibration = [r for r in have if r.role == "calibration"]
@@ -487,6 +526,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
             tail = false_alarm_tail(calibration, detector, first_row, block_rows, dt_s)
             if tail is None:
                 continue
+            tails[detector] = tail
             metrics.update({f"tail_level_{tag}": tail.level, f"tail_scale_{tag}": tail.scale,
                             f"tail_exceed_{tag}": tail.exceed, f"tail_blocks_{tag}": tail.blocks})
             metrics.update(tail_check(tail, evaluation, detector, first_row, block_rows, tag))
@@ -496,10 +536,12 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
                                           tail, rng, tag))
             runs_of = {f: [r for r in have if r.fault == f] for f in faults}
             runs_of = {f: runs for f, runs in runs_of.items() if runs}
+            faulty = runs_of
             metrics.update(operating_point_metrics(tail, runs_of, detector, first_row, dt_s,
                                                    speed_key(speed), hypothesis_parameter,
                                                    fault_parameter))
             curve += delay_curve_rows(tail, runs_of, detector, first_row, dt_s, speed)
+        metrics.update(paired_comparisons(tails, faulty, first_row, dt_s, speed_key(speed)))
     return metrics, thresholds, pd.DataFrame(roc), pd.DataFrame(curve)
 
 
@@ -582,7 +624,7 @@ def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings,
                             refits=pd.DataFrame(refits), delays=pd.DataFrame(delays))
 
 
-__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics",
-           "censored_median", "delay_curve_rows", "evidence", "false_alarm_tail",
-           "isolation_metrics", "long_running_check", "operating_point_metrics", "poisson_check",
+__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median", "delay_curve_rows",
+           "evidence", "false_alarm_tail", "isolation_metrics", "long_running_check",
+           "operating_point_metrics", "paired_comparisons", "paired_metrics", "poisson_check",
            "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

@@ -218,8 +218,8 @@ class LongRunningCheck:
     delays : pandas.DataFrame
         One row per (speed_kmh, detector, fault) of the run's records: the Kaplan–Meier median
         delay (s, NaN where fewer than half are detected) and the probability of detection
-        within 2 s at the threshold for ``spec.OPERATING_POINT_H`` hours (100) of the run's tail (``…_run``) and of the tail
-        refitted to the running (``…_running``).
+        within 2 s at the threshold for ``spec.OPERATING_POINT_H`` hours (100) of the run's
+        tail (``…_run``) and of the tail refitted to the running (``…_running``).
     """
 
     records: int

@@ -105,6 +105,11 @@ LADDER = {"no_axlebox_gyro_001": ("bogie and car-body accelerometers, gyro at 0.
                                    "noise_yawrate_radps": 10.0})}
 #: The operating point the page's delay tables read, h between false alarms.
 OPERATING_POINT_H = 100.0
+#: The paired comparisons at the operating point (A, B): the Bayesian detector against each
+#: other detector that does not know the fault, and the oracle against it (the value of
+#: knowing the fault).
+PAIRS = (("bayes", "glr"), ("bayes", "cusum"), ("bayes", "chi2"), ("oracle", "bayes"))
+
 #: The ladder's operating point, h between false alarms.
 LADDER_MTBFA_H = OPERATING_POINT_H
 
@@ -118,5 +123,5 @@ RUNNING_CHECK_LEVEL = 0.05
 MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
 __all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
-           "MTBFA_TARGETS_H", "OPERATING_POINT_H", "RUNNING_CHECK_H", "RUNNING_CHECK_LEVEL", "SPEC", "Settings",
-           "WITHIN_S"]
+           "MTBFA_TARGETS_H", "OPERATING_POINT_H", "PAIRS", "RUNNING_CHECK_H",
+           "RUNNING_CHECK_LEVEL", "SPEC", "Settings", "WITHIN_S"]

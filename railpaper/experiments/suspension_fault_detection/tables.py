@@ -30,6 +30,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
     OPERATING_POINT_H,
+    PAIRS,
     RUNNING_CHECK_H,
     WITHIN_S,
     Settings,
@@ -291,6 +292,41 @@ def _median_text(value: float) -> str:
     return "beyond the record" if not math.isfinite(value) else number(value)
 
 
+def _share_text(metrics: dict, key: str) -> str:
+    """"35 % [15, 59]": a share with its interval, in percent."""
+    return (f"{percent(metrics[key])} [{100 * metrics[key + '_low']:.0f}, "
+            f"{100 * metrics[key + '_high']:.0f}]")
+
+
+def paired_table(result, settings: Settings) -> str:
+    """Per fault and pair (A, B) of :data:`PAIRS`, at each speed and each detector's threshold
+    for :data:`OPERATING_POINT_H` hours (its tail model), on the same records: the share on
+    which A alarms earlier after the fault, and later, than B (ties are the rest), and the
+    median of B's delay − A's over the records both detect, each with its 95 % interval."""
+    m = result.metrics
+    rows = []
+    for fault in result.faults:
+        for i, (a, b) in enumerate(PAIRS):
+            cells = []
+            for speed in settings.speeds_kmh:
+                tag = (f"{a}_vs_{b}_{fault.name}_{speed_key(speed)}_at_{OPERATING_POINT_H:g}h")
+                if f"paired_earlier_{tag}" not in m:
+                    cells.append(NONE)
+                    continue
+                text = (f"earlier {_share_text(m, f'paired_earlier_{tag}')}, later "
+                        f"{_share_text(m, f'paired_later_{tag}')}")
+                key = f"paired_difference_median_s_{tag}"
+                if key in m:
+                    text += (f"; {number(m[key])} [{number(m[key + '_low'])}, "
+                             f"{number(m[key + '_high'])}] s")
+                cells.append(text)
+            rows.append((fault_short_label(fault) if i == 0 else "",
+                         f"{DETECTOR_SHORT[a]} vs {DETECTOR_SHORT[b]}", *cells))
+    return markdown(pd.DataFrame(rows, columns=["fault", "A vs B"] + [
+        f"{speed:g} km/h: A earlier, later than B (% [95 %]); median B − A where both detect "
+        "(s [95 %])" for speed in settings.speeds_kmh]))
+
+
 def long_running_summary(check: LongRunningCheck) -> str:
     """"3 of 50 checks contradict their tail (2 with more alarms, 1 with fewer)"."""
     outcomes = check.checks["outcome"] if len(check.checks) else pd.Series([], dtype=str)
@@ -433,5 +469,5 @@ __all__ = ["DETECTOR_SHORT", "PARAMETERS", "RUNG_SHORT", "STATISTICS", "clean", 
            "delay_text", "detection_table", "estimate_table", "false_alarm_table",
            "fault_free_flange_text", "fault_short_label", "faults_table", "interval_text",
            "ladder_table", "long_running_outcomes", "long_running_summary",
-           "long_running_table", "operating_point_table", "percent", "running_delay_table",
-           "tail_check_failures", "tail_table", "threshold_table"]
+           "long_running_table", "operating_point_table", "paired_table", "percent",
+           "running_delay_table", "tail_check_failures", "tail_table", "threshold_table"]

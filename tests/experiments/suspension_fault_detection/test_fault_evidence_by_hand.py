@@ -166,3 +166,28 @@ def test_a_critical_speed_beyond_the_search_is_a_field_not_a_number():
     rows = [line for line in table.splitlines() if line.startswith("| ")][1:]
     assert rows[0].endswith("| 456.4 |") and rows[1].endswith("| above 600 |")
     assert rows[2].endswith("| 451.4 |") and rows[3].endswith("| — |")
+
+
+def test_paired_comparison_of_two_detectors_on_the_same_records_by_hand():
+    """Five records: A earlier on the first, a tie (same sample) on the second, A never on the
+    third where B detects, both never on the fourth (a tie), B earlier on the fifth."""
+    import numpy as np
+    from scipy.stats import beta
+
+    from railpaper.experiments.suspension_fault_detection.evidence import paired_metrics
+
+    inf = np.inf
+    m = paired_metrics([0.005, 0.01, inf, inf, 0.02], [0.01, 0.01, 0.5, inf, 0.01], "x")
+    assert m["paired_earlier_x"] == pytest.approx(1 / 5)
+    assert m["paired_later_x"] == pytest.approx(2 / 5)
+    # Clopper-Pearson for 1 of 5: the beta quantiles
+    assert m["paired_earlier_x_low"] == pytest.approx(beta.ppf(0.025, 1, 5))
+    assert m["paired_earlier_x_high"] == pytest.approx(beta.ppf(0.975, 2, 4))
+    # both detect records 1, 2 and 5: B - A = 0.005, 0, -0.01; median 0, and with three records
+    # the distribution-free interval is [min, max]
+    assert m["paired_both_detected_x"] == 3
+    assert m["paired_difference_median_s_x"] == pytest.approx(0.0)
+    assert (m["paired_difference_median_s_x_low"], m["paired_difference_median_s_x_high"]) == \
+        pytest.approx((-0.01, 0.005))
+    none = paired_metrics([inf, inf], [inf, inf], "y")
+    assert none["paired_both_detected_y"] == 0 and "paired_difference_median_s_y" not in none
