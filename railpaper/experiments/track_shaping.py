@@ -1,5 +1,6 @@
 """The track irregularity as a Kalman filter sees it: a second-order shaping filter fitted to a
-spectrum at the vehicle's speed (shared by the chapters that filter a vertical profile)."""
+spectrum at the vehicle's speed (shared by the chapters that filter a vertical profile, and by
+the fault appendix's filters that are not given the alignment)."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from railpaper import track
 from railpaper.estimators import kalman_baseline as kb
 
 
-def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float]):
-    """Second-order shaping filter fitted to the vertical spectrum at speed V: ``S_t(ω) = S(ω/V)/V``.
+def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float],
+                   component: str = "vertical"):
+    """Second-order shaping filter fitted to a spectrum at speed V: ``S_t(ω) = S(ω/V)/V``.
 
     Parameters
     ----------
@@ -20,6 +22,9 @@ def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float])
         Vehicle speed, m/s.
     band_m : (float, float)
         Shortest and longest wavelength of the profile, m; the band's variance constrains the fit.
+    component : str
+        ``"vertical"`` (profile, the default) or ``"alignment"``
+        (:data:`railpaper.track.COMPONENTS`).
 
     Returns
     -------
@@ -28,6 +33,6 @@ def shaping_filter(spectrum: str, speed_mps: float, band_m: tuple[float, float])
     """
     omega_m = np.logspace(np.log10(2 * np.pi / band_m[1]), np.log10(2 * np.pi / band_m[0]), 200)
     omega_t = omega_m * speed_mps
-    S_t = track.psd(spectrum, "vertical", omega_m) / speed_mps
-    variance = track.band_variance(spectrum, "vertical", *band_m)
+    S_t = track.psd(spectrum, component, omega_m) / speed_mps
+    variance = track.band_variance(spectrum, component, *band_m)
     return kb.fit_shaping_filter(omega_t, S_t, variance), omega_t, S_t
