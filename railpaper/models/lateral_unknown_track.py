@@ -116,12 +116,14 @@ def augment(batch: LinearGaussianBatch, Phi_s: np.ndarray, Q_s: np.ndarray,
 def unknown_track_system(system, Phi_s: np.ndarray, Q_s: np.ndarray, delay: int):
     """``system(theta) -> LinearGaussianBatch`` of :func:`augment` around a known-input
     ``system`` (:func:`railpaper.models.lateral_16state.lateral_system`); its ``n_states``
-    attribute is the augmented state's size."""
+    attribute is the augmented state's size and ``track_covariance`` the track states'
+    stationary covariance (:func:`track_covariance`, the filters' start)."""
 
     def augmented(theta: np.ndarray) -> LinearGaussianBatch:
         return augment(system(theta), Phi_s, Q_s, delay)
 
     augmented.n_states = N_STATES + SHAPING_STATES + delay
+    augmented.track_covariance = track_covariance(Phi_s, Q_s, delay)
     return augmented
 
 

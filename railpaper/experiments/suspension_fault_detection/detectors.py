@@ -21,7 +21,8 @@
   up to which fault and when, so its gap to ``bayes`` is the value of knowing the fault.
 
 All of them filter with the record's own process noise (the track input's changes, chapter 003)
-from the state at rest; the sample time is the run's ``dt_s``.
+from the state at rest (:func:`initial_state`; filters that estimate the track start it at its
+stationary covariance); the sample time is the run's ``dt_s``.
 """
 
 from __future__ import annotations
@@ -41,13 +42,27 @@ from railpaper.models import lateral_16state
 P0_SCALE = 1e-10
 
 
+def initial_state(system) -> tuple[np.ndarray, np.ndarray]:
+    """Every filter's start: the vehicle at rest (mean 0, covariance ``P0_SCALE`` I on its 16
+    states) and, for filters that estimate the track (``system.track_covariance``, see
+    :mod:`railpaper.models.lateral_unknown_track`), the track states at their stationary
+    covariance."""
+    n = lateral_16state.N_STATES
+    track = getattr(system, "track_covariance", None)
+    size = n + (0 if track is None else len(track))
+    P0 = np.zeros((size, size))
+    P0[:n, :n] = P0_SCALE * np.eye(n)
+    if track is not None:
+        P0[n:, n:] = track
+    return np.zeros(size), P0
+
+
 def nominal_innovations(system, theta: np.ndarray, record: LateralRecord) -> np.ndarray:
     """The nominal model's Kalman filter's whitened innovations z_k (K, p) on the record:
     N(0, I) while the vehicle is healthy and the model is right."""
     nominal = system(theta[None])
     one = LinearGaussianBatch(nominal.F[0], nominal.Q, nominal.H[0], nominal.R, nominal.B[0])
-    return whitened_innovations(one, record.y, np.zeros(lateral_16state.N_STATES),
-                                P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps).z
+    return whitened_innovations(one, record.y, *initial_state(system), u=record.u_mps).z
 
 
 def residual_cusum(system, theta: np.ndarray, record: LateralRecord, variance_ratio: float,
@@ -120,9 +135,8 @@ def oracle_change_posterior(system, theta: np.ndarray, record: LateralRecord,
     if inside.size == 0:                          # the record ended before any fault time
         return OraclePosterior(np.zeros(K), np.full(K, -np.inf), np.zeros(len(fault_steps)),
                                np.full(len(values), 1.0 / len(values)), 0)
-    lik = change_likelihoods(system, record.y, theta, values, inside,
-                             np.zeros(lateral_16state.N_STATES),
-                             P0_SCALE * np.eye(lateral_16state.N_STATES), u=record.u_mps)
+    lik = change_likelihoods(system, record.y, theta, values, inside, *initial_state(system),
+                             u=record.u_mps)
     # the prior's mass on grid steps past the record's end is still "not yet changed"
     prior = np.ones((len(values), inside.size))
     p_none = p_no_fault + (1.0 - p_no_fault) * (1.0 - inside.size / len(fault_steps))
@@ -175,11 +189,10 @@ def change_bank(system, theta: np.ndarray, record: LateralRecord, hypotheses: Ba
         return WindowedChangeStatistics(none, none.copy(), np.full(K, -1), np.full(K, -1),
                                         window_steps, 0)
     return windowed_change_statistics(system, record.y, theta, hypotheses.values, window_steps,
-                                      np.zeros(lateral_16state.N_STATES),
-                                      P0_SCALE * np.eye(lateral_16state.N_STATES),
-                                      u=record.u_mps, first_change_step=first_change_step)
+                                      *initial_state(system), u=record.u_mps,
+                                      first_change_step=first_change_step)
 
 
 __all__ = ["BankHypotheses", "OraclePosterior", "bank_hypotheses", "change_bank",
-           "nominal_innovations", "oracle_change_posterior", "oracle_hypotheses",
-           "residual_cusum", "windowed_chi2"]
+           "initial_state", "nominal_innovations", "oracle_change_posterior",
+           "oracle_hypotheses", "residual_cusum", "windowed_chi2"]

@@ -431,16 +431,22 @@ def delay_curve_rows(tail: ExponentialTail, runs_of: dict, detector: str, first_
 
 
 def paired_metrics(delay_a: np.ndarray, delay_b: np.ndarray, tag: str) -> dict:
-    """Two detectors on the same records (delays, inf where a record is not detected):
-    ``paired_earlier_<tag>`` and ``paired_later_<tag>``, the share of records on which A's
-    delay is shorter (longer) than B's, each with its Clopper–Pearson interval (the rest are
-    ties, both undetected among them), and over the records both detect the median of
-    B's delay − A's (``paired_difference_median_s_<tag>``, distribution-free interval;
+    """Two detectors on the same records (delays, inf where a record is not detected after
+    its fault, an alarm before it included): ``paired_earlier_<tag>`` and
+    ``paired_later_<tag>``, the share of records on which A's delay is shorter (longer) than
+    B's, each with its Clopper–Pearson interval (the rest are ties: the same sample, or
+    neither detecting); ``paired_sign_share_<tag>``, the share of A earlier among the records
+    where they differ (the sign test's, with its interval; absent without such a record); and,
+    conditional on both detecting, the median of B's delay − A's
+    (``paired_difference_median_s_<tag>``, distribution-free interval;
     ``paired_both_detected_<tag>`` records)."""
     a, b = np.asarray(delay_a, float), np.asarray(delay_b, float)
     m = {}
     m.update(rate(a < b).metrics(f"paired_earlier_{tag}"))
     m.update(rate(a > b).metrics(f"paired_later_{tag}"))
+    discordant = a != b
+    if discordant.any():                                 # the sign test's share
+        m.update(rate((a < b)[discordant]).metrics(f"paired_sign_share_{tag}"))
     both = np.isfinite(a) & np.isfinite(b)
     m[f"paired_both_detected_{tag}"] = int(both.sum())
     if both.any():

@@ -50,9 +50,11 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
     LADDER,
     LADDER_MTBFA_H,
+    RUNGS_WITHOUT_TRACK,
     Settings,
 )
-from railpaper.models import lateral_16state
+from railpaper.experiments.track_shaping import shaping_filter
+from railpaper.models import lateral_16state, lateral_unknown_track
 from railpaper.monitoring import block_maxima, running_for_power
 from railpaper.threads import one_thread
 from railpaper.track import SPECTRA
@@ -153,19 +155,39 @@ def fault_time(settings: Settings, grid_s: np.ndarray, seed: int) -> float:
     return float(grid_s[np.random.default_rng([seed, 13]).integers(len(grid_s))])
 
 
+def track_model(settings: Settings, fixed: dict, speed_kmh: float
+                ) -> tuple[np.ndarray, np.ndarray, int]:
+    """What filters that are not given the track model of it at ``speed_kmh``: the discrete
+    shaping filter ``(Φ_s, Q_s)`` of a second-order fit to the alignment spectrum of the run's
+    track (its band) and the wheelbase delay in samples
+    (:mod:`railpaper.models.lateral_unknown_track`)."""
+    speed_mps = speed_kmh / 3.6
+    fit, _, _ = shaping_filter(settings.spectrum, speed_mps,
+                               (settings.wavelength_min_m, settings.wavelength_max_m),
+                               "alignment")
+    Af, Bf, _ = fit.state_space()
+    Phi_s, Q_s = lateral_unknown_track.discrete_shaping(Af, Bf, settings.dt_s)
+    return Phi_s, Q_s, lateral_unknown_track.delay_steps(2 * fixed["a"], speed_mps,
+                                                         settings.dt_s)
+
+
 def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
                fault: Fault | None, role: str, speed_kmh: float, seed: int, values: np.ndarray,
-               bank: detectors.BankHypotheses) -> tuple[RecordRun, dict]:
+               bank: detectors.BankHypotheses, track: tuple | None = None
+               ) -> tuple[RecordRun, dict]:
     """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
     what the illustration needs (the oracle's posterior).  ``fault_settings`` are the
     catalogue's (:func:`.faults.catalogue`), ``values`` the oracle's hypotheses and ``bank``
-    those of ``glr`` and ``bayes``."""
+    those of ``glr`` and ``bayes``; with ``track`` (:func:`track_model`) the filters are not
+    given the track input and estimate it."""
     grid_s = faults.fault_times_s(fault_settings)
     tau = fault_time(settings, grid_s, seed) if fault is not None else -1.0
     rec = records.simulate_faulted(settings, fault_settings, fixed, theta, fault, max(tau, 0.0),
                                    speed_kmh, seed)
     system = filter_system(records.record_settings(settings, speed_kmh), fixed, theta,
                            rec.record, theta_ref=theta)
+    if track is not None:
+        system = lateral_unknown_track.unknown_track_system(system, *track)
     steps = np.round(grid_s / settings.dt_s).astype(int) + 1
     oracle = detectors.oracle_change_posterior(system, theta, rec.record, values, steps,
                                                fault_settings["p_no_fault"])
@@ -256,12 +278,13 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
                        and (r.fault, r.role, r.seed) in wanted]}
     for n, (rung, (_, overrides)) in enumerate(LADDER.items()):
         worse = settings.replace(**overrides)
+        track = track_model(worse, fixed, speed) if rung in RUNGS_WITHOUT_TRACK else None
         rungs[rung] = []
         for i, (fault_name, role, seed) in enumerate(items):
             progress(0.95 + 0.04 * (n * len(items) + i) / (len(LADDER) * len(items)),
                      f"ladder {rung}, {fault_name}, seed {seed}")
             run_, _ = run_record(worse, fault_settings, fixed, theta, by_name.get(fault_name),
-                                 role, speed, seed, values, bank)
+                                 role, speed, seed, values, bank, track)
             rungs[rung].append(run_)
     monitor_from = float(grid_s[0])
     first_row = window_rows(settings.dt_s, monitor_from)
@@ -461,5 +484,6 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
 
 
 __all__ = ["FAULT_FREE_RUNNING", "LADDER_KEPT", "RUNNING_POWER_CHECK_H", "RUNNING_SEED_OFFSET",
-           "STUDIES", "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan", "run", "run_record",
-           "running_records", "running_rows", "stored_sizes", "validate", "window_steps"]
+           "STUDIES", "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan",
+           "run", "run_record", "running_records", "running_rows", "stored_sizes",
+           "track_model", "validate", "window_steps"]

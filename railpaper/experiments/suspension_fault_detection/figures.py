@@ -36,6 +36,11 @@ from railpaper.experiments.suspension_fault_detection.tables import (
 )
 from railpaper.monitoring import fit_exponential_tail
 
+#: Short labels of the ladder's rungs under the ladder figure's axes: what each rung takes
+#: away, cumulatively.
+RUNG_TICKS = {"ideal": "ideal", "no_axlebox_gyro_001": "− axle-box acc.",
+              "accelerometers_only": "− gyro", "track_unknown": "− track input"}
+
 #: Colour and marker of each detector.
 DETECTOR_STYLES = {"cusum": ("C0", "o"), "chi2": ("C1", "v"), "glr": ("C4", "^"),
                    "bayes": ("C2", "s"), "oracle": ("C3", "D")}
@@ -312,8 +317,8 @@ def ladder_figure(result, settings: Settings):
         top.set_ylim(0.5 * result.dt_s, settings.duration_s)
         bottom.set_ylim(-5, 105)
         bottom.set_xticks(x)
-        bottom.set_xticklabels(["ideal", "no axle-box,\ngyro 0.01", "accel.\nonly"],
-                               fontsize=7, rotation=30)
+        bottom.set_xticklabels([RUNG_TICKS.get(r, r) for r in rungs], fontsize=6, rotation=45,
+                               ha="right", rotation_mode="anchor")
         for ax in (top, bottom):
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylabel("median delay (s)", fontsize=8)

@@ -93,7 +93,8 @@ WITHIN_S = (0.5, 1.0, 2.0)
 MTBFA_TARGETS_H = (10.0, 100.0, 1000.0)
 
 #: The realism ladder's rungs beyond the ideal one (the run's own sensors): cumulative changes
-#: of the sensors, each a dict of settings.  A channel is taken away by making its noise so
+#: of the sensors, each a dict of settings (and, from ``track_unknown`` on, of the filters:
+#: :data:`RUNGS_WITHOUT_TRACK`).  A channel is taken away by making its noise so
 #: large that the filters give it no weight (100 m/s^2 against accelerations of about
 #: 0.1-1 m/s^2; 10 rad/s against yaw rates of about 0.01 rad/s): the limit of removing it.
 #: No published noise level is used: 0.01 rad/s is ten times chapter 003's gyro.
@@ -102,7 +103,13 @@ LADDER = {"no_axlebox_gyro_001": ("bogie and car-body accelerometers, gyro at 0.
                                    "noise_yawrate_radps": 0.01}),
           "accelerometers_only": ("bogie and car-body accelerometers only",
                                   {"noise_acc_wheelset_mps2": 100.0,
-                                   "noise_yawrate_radps": 10.0})}
+                                   "noise_yawrate_radps": 10.0}),
+          "track_unknown": ("bogie and car-body accelerometers only, the track input unknown",
+                            {"noise_acc_wheelset_mps2": 100.0, "noise_yawrate_radps": 10.0})}
+#: The rungs whose filters are not given the track input under each wheelset: they estimate it
+#: with a shaping filter of the alignment spectrum at the speed and the wheelbase delay L/v
+#: (:mod:`railpaper.models.lateral_unknown_track`).
+RUNGS_WITHOUT_TRACK = ("track_unknown",)
 #: The operating point the page's delay tables read, h between false alarms.
 OPERATING_POINT_H = 100.0
 #: The paired comparisons at the operating point (A, B): the Bayesian detector against each
@@ -124,4 +131,4 @@ MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
 __all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
            "MTBFA_TARGETS_H", "OPERATING_POINT_H", "PAIRS", "RUNNING_CHECK_H",
-           "RUNNING_CHECK_LEVEL", "SPEC", "Settings", "WITHIN_S"]
+           "RUNNING_CHECK_LEVEL", "RUNGS_WITHOUT_TRACK", "SPEC", "Settings", "WITHIN_S"]

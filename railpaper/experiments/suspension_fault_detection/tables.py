@@ -365,7 +365,8 @@ def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
 #: Short names of the realism ladder's rungs.
 RUNG_SHORT = {"ideal": "ideal (five channels)",
               "no_axlebox_gyro_001": "no axle-box accelerometers, gyro 0.01 rad/s",
-              "accelerometers_only": "bogie and car-body accelerometers only"}
+              "accelerometers_only": "bogie and car-body accelerometers only",
+              "track_unknown": "accelerometers only, the track input unknown"}
 
 
 def ladder_table(result, settings: Settings) -> str:

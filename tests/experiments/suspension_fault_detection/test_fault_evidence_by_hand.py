@@ -183,6 +183,8 @@ def test_paired_comparison_of_two_detectors_on_the_same_records_by_hand():
     # Clopper-Pearson for 1 of 5: the beta quantiles
     assert m["paired_earlier_x_low"] == pytest.approx(beta.ppf(0.025, 1, 5))
     assert m["paired_earlier_x_high"] == pytest.approx(beta.ppf(0.975, 2, 4))
+    # the sign test: 3 records differ, A earlier on 1 of them
+    assert m["paired_sign_share_x"] == pytest.approx(1 / 3) and m["paired_sign_share_x_n"] == 3
     # both detect records 1, 2 and 5: B - A = 0.005, 0, -0.01; median 0, and with three records
     # the distribution-free interval is [min, max]
     assert m["paired_both_detected_x"] == 3
@@ -191,3 +193,4 @@ def test_paired_comparison_of_two_detectors_on_the_same_records_by_hand():
         pytest.approx((-0.01, 0.005))
     none = paired_metrics([inf, inf], [inf, inf], "y")
     assert none["paired_both_detected_y"] == 0 and "paired_difference_median_s_y" not in none
+    assert "paired_sign_share_y" not in none
