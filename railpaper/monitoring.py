@@ -143,6 +143,19 @@ def poisson_excess_power(mean: float | np.ndarray, ratio: float, alpha: float = 
     return float(power) if power.ndim == 0 else power
 
 
+def poisson_two_sided_power(mean: float, ratio: float, level: float = 0.05) -> float:
+    """Power of the two-sided test that calls a Poisson count of expected ``mean`` inconsistent
+    when its p-value ``2 min(P(X ≤ k), P(X ≥ k))`` (capped at 1) is below ``level``, against
+    ``ratio`` × ``mean``: the probability, under the larger mean, of a count it rejects
+    (summed over the counts up to far in the larger mean's tail)."""
+    if mean <= 0 or ratio <= 0:
+        raise ValueError("need mean > 0 and ratio > 0")
+    counts = np.arange(0, int(ratio * mean + 20 * math.sqrt(ratio * mean) + 50))
+    p = np.minimum(1.0, 2.0 * np.minimum(scipy_stats.poisson.cdf(counts, mean),
+                                         scipy_stats.poisson.sf(counts - 1, mean)))
+    return float(scipy_stats.poisson.pmf(counts, ratio * mean)[p < level].sum())
+
+
 def running_for_power(check_mtbfa_h: float, record_s: float, ratio: float = 2.0,
                       alpha: float = 0.05, power: float = 0.8, most: int = 100_000) -> int:
     """The fewest records of ``record_s`` seconds of fault-free running whose alarm count at a
@@ -309,5 +322,6 @@ def detected_within(times: Sequence[float], observed: Sequence[bool], horizon_s:
 __all__ = ["ExponentialTail", "FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve",
            "block_maxima", "cusum_alarms", "cusum_average_run_length", "detected_within",
            "fit_exponential_tail", "kaplan_meier", "kaplan_meier_median",
-           "mean_time_between_false_alarms_h", "poisson_excess_power", "restarted_cusum_alarms",
+           "mean_time_between_false_alarms_h", "poisson_excess_power", "poisson_two_sided_power",
+           "restarted_cusum_alarms",
            "running_for_power", "shiryaev_roberts_mtbfa_lower_h"]

@@ -16,6 +16,7 @@ from railpaper.monitoring import (
     kaplan_meier_median,
     mean_time_between_false_alarms_h,
     poisson_excess_power,
+    poisson_two_sided_power,
     running_for_power,
 )
 
@@ -181,3 +182,19 @@ def test_running_for_power_is_the_first_size_that_reaches_the_power():
     assert n == 1088
     with pytest.raises(ValueError):
         running_for_power(0.1, 3.0, ratio=1.0)
+
+
+def test_poisson_two_sided_power_by_a_brute_force_sum():
+    # the rule: p = min(1, 2 min(P(X <= k), P(X >= k))) under mean 10 below 0.05 rejects; its
+    # power is the mass of those counts under mean 20, summed term by term here
+    def pmf(k, mean):
+        return math.exp(-mean) * mean ** k / math.factorial(k)
+
+    def p_value(k, mean):
+        below = sum(pmf(j, mean) for j in range(k + 1))
+        above = 1.0 - sum(pmf(j, mean) for j in range(k))
+        return min(1.0, 2.0 * min(below, above))
+
+    power = sum(pmf(k, 20.0) for k in range(120) if p_value(k, 10.0) < 0.05)
+    assert poisson_two_sided_power(10.0, 2.0) == pytest.approx(power, abs=1e-10)
+    assert poisson_two_sided_power(10.0, 2.0) < poisson_excess_power(10.0, 2.0)  # 0.025 a side

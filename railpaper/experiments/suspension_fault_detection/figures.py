@@ -384,12 +384,17 @@ def long_running_figure(check: LongRunningCheck, result, settings: Settings):
             rows = check.checks[(check.checks["speed_kmh"] == speed)
                                 & (check.checks["detector"] == det)]
             for row in rows.itertuples():
-                value = row.mtbfa_direct_h if np.isfinite(row.mtbfa_direct_h) else running_h
-                high = row.mtbfa_high_h if np.isfinite(row.mtbfa_high_h) else 10 * running_h
-                ax.errorbar([row.threshold], [value], yerr=[[value - row.mtbfa_low_h],
-                                                            [high - value]],
-                            fmt=OUTCOME_STYLES[row.outcome][1], ms=3,
-                            color=OUTCOME_STYLES[row.outcome][0], lw=0.8)
+                colour, marker = OUTCOME_STYLES[row.outcome]
+                if row.alarms == 0:            # no alarm: only a lower bound, drawn as one
+                    ax.plot([row.threshold, row.threshold], [row.mtbfa_low_h, 10 * running_h],
+                            color=colour, lw=0.8)
+                    ax.plot([row.threshold], [row.mtbfa_low_h], marker="^", ms=4, color=colour,
+                            mfc="white", ls="")
+                    continue
+                ax.errorbar([row.threshold], [row.mtbfa_direct_h],
+                            yerr=[[row.mtbfa_direct_h - row.mtbfa_low_h],
+                                  [row.mtbfa_high_h - row.mtbfa_direct_h]],
+                            fmt=marker, ms=3, color=colour, lw=0.8)
             ax.axhline(running_h, color="0.5", lw=0.8, ls=":")
             ax.set_yscale("log")
             ax.tick_params(labelsize=6)
@@ -405,6 +410,8 @@ def long_running_figure(check: LongRunningCheck, result, settings: Settings):
                Line2D([], [], color="0.5", lw=0.8, ls=":")]
     labels = ["measured on the stored running", "tail model of the run (detector's colour)",
               "tail refitted to the running", "running measured"]
+    handles.append(Line2D([], [], color="k", marker="^", mfc="white", ms=4, ls=""))
+    labels.append("no alarm: lower end of the interval")
     for outcome, (colour, marker) in OUTCOME_STYLES.items():
         handles.append(Line2D([], [], color=colour, marker=marker, ms=3, ls=""))
         labels.append(f"check: {outcome}")

@@ -35,6 +35,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     WITHIN_S,
     Settings,
 )
+from railpaper.monitoring import SECONDS_PER_HOUR, poisson_two_sided_power
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
 DETECTOR_SHORT = {"cusum": "variance CUSUM", "chi2": "windowed χ²", "glr": "GLR",
@@ -298,11 +299,31 @@ def _share_text(metrics: dict, key: str) -> str:
             f"{100 * metrics[key + '_high']:.0f}]")
 
 
+def paired_cell(metrics: dict, tag: str) -> str:
+    """One pair at one speed: "same sample on all 20 records" where neither ever alarms
+    earlier, else the shares of records on which A alarms earlier and later than B (the rest
+    are ties) with their intervals, the sign test's share of A among the records where they
+    differ, and the median of B − A over the records both detect (s), with the records."""
+    m, n = metrics, int(metrics[f"paired_earlier_{tag}_n"])
+    both = int(metrics.get(f"paired_both_detected_{tag}", 0))
+    if m[f"paired_earlier_{tag}"] == 0 and m[f"paired_later_{tag}"] == 0:
+        return (f"same sample on all {n} records" if both == n else
+                f"tied on all {n} records ({n - both} detected by neither)")
+    text = (f"earlier {_share_text(m, f'paired_earlier_{tag}')}, later "
+            f"{_share_text(m, f'paired_later_{tag}')} of {n}")
+    if f"paired_sign_share_{tag}" in m:
+        text += f"; A first in {_share_text(m, f'paired_sign_share_{tag}')} where they differ"
+    key = f"paired_difference_median_s_{tag}"
+    if key in m:
+        text += (f"; B − A {number(m[key])} [{number(m[key + '_low'])}, "
+                 f"{number(m[key + '_high'])}] s on the {both} both detect")
+    return text
+
+
 def paired_table(result, settings: Settings) -> str:
     """Per fault and pair (A, B) of :data:`PAIRS`, at each speed and each detector's threshold
-    for :data:`OPERATING_POINT_H` hours (its tail model), on the same records: the share on
-    which A alarms earlier after the fault, and later, than B (ties are the rest), and the
-    median of B's delay − A's over the records both detect, each with its 95 % interval."""
+    for :data:`OPERATING_POINT_H` hours of its own tail model, on the same records
+    (:func:`paired_cell`)."""
     m = result.metrics
     rows = []
     for fault in result.faults:
@@ -310,21 +331,32 @@ def paired_table(result, settings: Settings) -> str:
             cells = []
             for speed in settings.speeds_kmh:
                 tag = (f"{a}_vs_{b}_{fault.name}_{speed_key(speed)}_at_{OPERATING_POINT_H:g}h")
-                if f"paired_earlier_{tag}" not in m:
-                    cells.append(NONE)
-                    continue
-                text = (f"earlier {_share_text(m, f'paired_earlier_{tag}')}, later "
-                        f"{_share_text(m, f'paired_later_{tag}')}")
-                key = f"paired_difference_median_s_{tag}"
-                if key in m:
-                    text += (f"; {number(m[key])} [{number(m[key + '_low'])}, "
-                             f"{number(m[key + '_high'])}] s")
-                cells.append(text)
+                cells.append(paired_cell(m, tag) if f"paired_earlier_{tag}" in m else NONE)
             rows.append((fault_short_label(fault) if i == 0 else "",
-                         f"{DETECTOR_SHORT[a]} vs {DETECTOR_SHORT[b]}", *cells))
-    return markdown(pd.DataFrame(rows, columns=["fault", "A vs B"] + [
-        f"{speed:g} km/h: A earlier, later than B (% [95 %]); median B − A where both detect "
-        "(s [95 %])" for speed in settings.speeds_kmh]))
+                         f"{DETECTOR_SHORT[a]} (A) vs {DETECTOR_SHORT[b]} (B)", *cells))
+    return markdown(pd.DataFrame(rows, columns=["fault", "pair"] + [
+        f"{speed:g} km/h: records on which A alarms earlier, later (% [95 %]); sign test; "
+        "median B − A where both detect (s [95 %])" for speed in settings.speeds_kmh]))
+
+
+def long_running_facts(check: LongRunningCheck, metrics: dict, settings: Settings,
+                       power_check_h: float = 0.1) -> dict[str, str]:
+    """What the page says of the stored running, as text: the power of the consistency rule
+    (two-sided, on the running watched) against twice the alarms predicted at
+    ``power_check_h`` hours, per speed (``power``); the orders of magnitude from each tail's
+    running to 100 h (``orders_run``: the calibration records', ``orders_refit``: the stored
+    running's, the smallest over speeds) and how many times as many blocks the refit has
+    (``block_ratio``, the smallest over speeds)."""
+    speeds = list(check.running_h)
+    calibration_h = [metrics[f"tail_blocks_cusum_{speed_key(v)}"] * check.block_s
+                     / SECONDS_PER_HOUR for v in speeds]
+    ratio = min(len(check.maxima[("cusum", v)]) / metrics[f"tail_blocks_cusum_{speed_key(v)}"]
+                for v in speeds)
+    return {"power": ", ".join(f"{poisson_two_sided_power(h / power_check_h, 2.0):.2f} at "
+                               f"{v:g} km/h" for v, h in check.running_h.items()),
+            "orders_run": f"{math.log10(OPERATING_POINT_H / max(calibration_h)):.1f}",
+            "orders_refit": f"{math.log10(OPERATING_POINT_H / max(check.running_h.values())):.1f}",
+            "block_ratio": f"{ratio:.0f}"}
 
 
 def long_running_summary(check: LongRunningCheck) -> str:
@@ -469,6 +501,7 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
 __all__ = ["DETECTOR_SHORT", "PARAMETERS", "RUNG_SHORT", "STATISTICS", "clean", "delay_cell",
            "delay_text", "detection_table", "estimate_table", "false_alarm_table",
            "fault_free_flange_text", "fault_short_label", "faults_table", "interval_text",
-           "ladder_table", "long_running_outcomes", "long_running_summary",
-           "long_running_table", "operating_point_table", "paired_table", "percent",
-           "running_delay_table", "tail_check_failures", "tail_table", "threshold_table"]
+           "ladder_table", "long_running_facts", "long_running_outcomes",
+           "long_running_summary", "long_running_table", "operating_point_table", "paired_cell",
+           "paired_table", "percent", "running_delay_table", "tail_check_failures", "tail_table",
+           "threshold_table"]
