@@ -356,7 +356,7 @@ def long_running_facts(check: LongRunningCheck, metrics: dict, settings: Setting
                                f"{v:g} km/h" for v, h in check.running_h.items()),
             "orders_run": f"{math.log10(OPERATING_POINT_H / max(calibration_h)):.1f}",
             "orders_refit": f"{math.log10(OPERATING_POINT_H / max(check.running_h.values())):.1f}",
-            "block_ratio": f"{ratio:.0f}"}
+            "block_ratio": f"{ratio:.0f}" if ratio >= 10 else f"{ratio:.2g}"}
 
 
 def long_running_summary(check: LongRunningCheck) -> str:

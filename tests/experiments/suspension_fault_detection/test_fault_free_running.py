@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from railpaper.experiments.records import assert_chunk_invariant, map_in_process
-from railpaper.experiments.suspension_fault_detection import SPEC, STUDIES, stored_sizes
+from railpaper.experiments.suspension_fault_detection import SPEC, STUDIES, stored_sizes, tables
 from railpaper.experiments.suspension_fault_detection.evidence import (
     long_running_check,
     poisson_check,
@@ -21,7 +21,7 @@ from railpaper.experiments.suspension_fault_detection.experiment import (
     monitored_s,
 )
 from railpaper.experiments.suspension_fault_detection.result import RecordRun
-from railpaper.monitoring import poisson_excess_power
+from railpaper.monitoring import poisson_excess_power, poisson_two_sided_power
 
 ONE_SPEED = {"speeds_kmh": [300.0]}
 
@@ -130,3 +130,20 @@ def test_delays_at_both_tails_thresholds_by_hand():
     assert row["km_delay_median_s_run"] == pytest.approx(0.1)
     assert row["km_delay_median_s_running"] == pytest.approx(0.5)
     assert row["km_detected_within_2s_run"] == row["km_detected_within_2s_running"] == 1.0
+
+
+def test_long_running_facts_by_hand():
+    # 20 calibration blocks of 0.5 s (10 s = 1/360 h): 100 h is log10(36000) = 4.56 orders
+    # away; the running of test_long_running_check_by_hand (10 blocks, 5 s) log10(72000) =
+    # 4.86; half as many blocks
+    metrics = {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
+               "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": 20}
+    settings = SPEC.resolve(ONE_SPEED, False)
+    nan = np.nan
+    rows = _rows([[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, nan, nan]])
+    facts = tables.long_running_facts(long_running_check(rows, metrics, settings), metrics,
+                                      settings)
+    assert facts["orders_run"] == "4.6" and facts["orders_refit"] == "4.9"
+    assert facts["block_ratio"] == "0.5"
+    assert facts["power"] == (f"{poisson_two_sided_power(5 / 3600 / 0.1, 2.0):.2f} at "
+                              "300 km/h")
