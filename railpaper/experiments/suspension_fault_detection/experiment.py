@@ -51,6 +51,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     RUNGS_WITHOUT_TRACK,
+    TRACK_UNKNOWN_FAULT_SHARE,
     Settings,
 )
 from railpaper.experiments.track_shaping import shaping_filter
@@ -264,7 +265,10 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
     fault-free records (and its tail model for :data:`LADDER_MTBFA_H` hours); the ideal rung is
     the run's own records of those seeds, recalibrated the same way.  Also each rung's records
     at the ideal rung's thresholds for :data:`LADDER_MTBFA_H` hours (``…_ideal_thresholds_``):
-    what a monitor tuned on the ideal sensors does with the worse ones.  Metrics
+    what a monitor tuned on the ideal sensors does with the worse ones.  The rungs whose
+    filters estimate the track (:data:`RUNGS_WITHOUT_TRACK`) run the first
+    :data:`TRACK_UNKNOWN_FAULT_SHARE` of each fault's records (at least two) and all the
+    fault-free ones.  Metrics
     ``ladder_<rung>_<metric>`` (:data:`LADDER_KEPT`) and one row per (rung, detector, fault)."""
     if settings.ladder_records_per_fault < 2 or settings.ladder_fault_free_records < 4:
         return {}, pd.DataFrame()
@@ -281,6 +285,9 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
         track = track_model(worse, fixed, speed) if rung in RUNGS_WITHOUT_TRACK else None
         rungs[rung] = []
         for i, (fault_name, role, seed) in enumerate(items):
+            if track is not None and role == "fault" and seed >= settings.seed + max(
+                    2, int(TRACK_UNKNOWN_FAULT_SHARE * settings.ladder_records_per_fault)):
+                continue                       # this rung runs the first share of each fault
             progress(0.95 + 0.04 * (n * len(items) + i) / (len(LADDER) * len(items)),
                      f"ladder {rung}, {fault_name}, seed {seed}")
             run_, _ = run_record(worse, fault_settings, fixed, theta, by_name.get(fault_name),
