@@ -251,6 +251,12 @@ def _ladder_items(settings: Settings, chosen: list[Fault]) -> list[tuple[str, st
     return plan(rung, chosen)
 
 
+def track_unknown_fault_records(settings: Settings) -> int:
+    """Fault records per fault on the rungs whose filters estimate the track: the first
+    :data:`TRACK_UNKNOWN_FAULT_SHARE` of the ladder's, at least two."""
+    return max(2, int(TRACK_UNKNOWN_FAULT_SHARE * settings.ladder_records_per_fault))
+
+
 def _kept(metrics: dict, prefix: str) -> dict:
     point = f"_at_{LADDER_MTBFA_H:g}h"
     return {prefix + k: v for k, v in metrics.items()
@@ -285,8 +291,8 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
         track = track_model(worse, fixed, speed) if rung in RUNGS_WITHOUT_TRACK else None
         rungs[rung] = []
         for i, (fault_name, role, seed) in enumerate(items):
-            if track is not None and role == "fault" and seed >= settings.seed + max(
-                    2, int(TRACK_UNKNOWN_FAULT_SHARE * settings.ladder_records_per_fault)):
+            if (track is not None and role == "fault"
+                    and seed >= settings.seed + track_unknown_fault_records(settings)):
                 continue                       # this rung runs the first share of each fault
             progress(0.95 + 0.04 * (n * len(items) + i) / (len(LADDER) * len(items)),
                      f"ladder {rung}, {fault_name}, seed {seed}")
@@ -493,4 +499,4 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
 __all__ = ["FAULT_FREE_RUNNING", "LADDER_KEPT", "RUNNING_POWER_CHECK_H", "RUNNING_SEED_OFFSET",
            "STUDIES", "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan",
            "run", "run_record", "running_records", "running_rows", "stored_sizes",
-           "track_model", "validate", "window_steps"]
+           "track_model", "track_unknown_fault_records", "validate", "window_steps"]
