@@ -235,9 +235,9 @@ OUTCOME_MARK = {"consistent": "", "more alarms": " **more**", "fewer alarms": " 
 
 def long_running_table(check: LongRunningCheck) -> str:
     """Per speed and detector, each check of its tail model on the stored running (alarms
-    counted / predicted at the thresholds for each mean time, the outcome where the count
-    contradicts the tail) and the mean time between false alarms the tail refitted to the
-    running gives the run's threshold for 100 h."""
+    counted / predicted at the thresholds for each mean time, a column per mean time, the
+    outcome where the count contradicts the tail) and the mean time between false alarms the
+    tail refitted to the running gives the run's threshold for 100 h."""
     if not len(check.checks):
         return "*No checks: the run has no tail model (too few calibration records).*"
     rows = []
@@ -250,12 +250,12 @@ def long_running_table(check: LongRunningCheck) -> str:
                              & (check.refits["detector"] == det)
                              & (check.refits["mtbfa_h"] == 100.0)]
         hours = refit["mtbfa_h_of_run_threshold"].iloc[0] if len(refit) else math.nan
-        rows.append((number(speed), DETECTOR_SHORT[det],
+        rows.append((f"{DETECTOR_SHORT[det]}, {number(speed)} km/h",
                      *[cells.get(t, NONE) for t in RUNNING_CHECK_H],
                      NONE if not math.isfinite(hours) else number(hours, 2)))
     return markdown(pd.DataFrame(rows, columns=[
-        "speed (km/h)", "detector", *[f"alarms / predicted at {t:g} h" for t in RUNNING_CHECK_H],
-        "the '100 h' threshold under the refitted tail (h)"]))
+        "detector, speed", *[f"{t:g} h" for t in RUNNING_CHECK_H],
+        "'100 h' under the refit (h)"]))
 
 
 def running_delay_table(check: LongRunningCheck, faults: tuple[Fault, ...]) -> str:
