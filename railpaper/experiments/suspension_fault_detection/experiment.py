@@ -426,7 +426,9 @@ def running_records(settings: Settings) -> int:
     """Size of the stored fault-free running, fixed before it ran: the fewest records per speed
     whose alarm count at a threshold set for :data:`RUNNING_POWER_CHECK_H` hours finds twice
     the alarms the tail model predicts with power 0.8 (one-sided Poisson test at 5 %,
-    :func:`railpaper.monitoring.running_for_power`): 1088 records, 0.91 h, at the defaults."""
+    :func:`railpaper.monitoring.running_for_power`; the size at the defaults is pinned in a
+    test).  The check applied is two-sided and loses the running cut at flange contact, so its
+    power is lower; the page computes and says it."""
     return running_for_power(RUNNING_POWER_CHECK_H, monitored_s(settings))
 
 
