@@ -94,3 +94,30 @@ def test_allocation_caps_the_stored_rows_a_reader_may_use(tmp_path):
     write_allocation(tmp_path, {("c", "s"): (5, "")})
     assert (allocated_size("c", "s", tmp_path), allocated_size("d", "t", tmp_path)) == (5, 7)
     assert affordable(rows, "c", "s", tmp_path) is rows
+
+
+def test_stored_rows_and_provenance_for_a_page(tmp_path):
+    """A page reads a study's stored rows (sorted by seed, no commit column, capped by the
+    allocation) and what they cost; nothing stored is None and an empty provenance."""
+    from railpaper.experiments.records import RecordStudy
+    from railpaper.pipeline.chapters import chapter_spec
+    from railpaper.pipeline.evidence_store import EvidenceStore
+
+    chapter = "suspension-fault-detection"
+    settings = chapter_spec(chapter).resolve({}, True)
+    assert decisive.stored_rows(chapter, "fault_free_running", settings, tmp_path) is None
+    assert decisive.stored_provenance(chapter, "fault_free_running", tmp_path) == {}
+    study = RecordStudy(chapter, "fault_free_running", rows=None)
+    EvidenceStore(tmp_path).append(study, settings, pd.DataFrame(
+        {"seed": [7, 5, 6], "x_m": [0.7, 0.5, 0.6]}), "abc")
+    rows = decisive.stored_rows(chapter, "fault_free_running", settings, tmp_path)
+    assert rows.seed.tolist() == [5, 6, 7] and "commit" not in rows.columns
+    decisive.write_allocation(tmp_path, {(chapter, "fault_free_running"): (2, "")})
+    assert decisive.stored_rows(chapter, "fault_free_running", settings,
+                                tmp_path).x_m.tolist() == [0.5, 0.6]
+    (tmp_path / chapter).mkdir(exist_ok=True)
+    (tmp_path / chapter / "provenance.json").write_text(json.dumps(
+        {"commit": "abc", "date": "2026-12-06",
+         "studies": {"fault_free_running": {"records": 3, "cpu_s": 3.3}}}))
+    assert decisive.stored_provenance(chapter, "fault_free_running", tmp_path) == {
+        "records": 3, "cpu_s": 3.3, "commit": "abc", "date": "2026-12-06"}
