@@ -65,14 +65,23 @@ def _rows(maxima_per_record):
     return pd.DataFrame(rows)
 
 
+#: Two records' block maxima at 300 km/h: six whole blocks, then four (cut at flange contact).
+TWO_RECORDS = [[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, np.nan, np.nan]]
+
+
+def _cusum_tail(blocks: int = 100) -> dict:
+    """The run's metrics of a cusum tail at 300 km/h: P(block max > h) = 0.5 exp(-h) in 0.5 s
+    blocks, fitted on ``blocks`` blocks."""
+    return {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
+            "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": blocks}
+
+
 def test_long_running_check_by_hand():
     # the cusum's tail: P(block max > h) = 0.5 exp(-h) in 0.5 s blocks, so the mean time
     # between false alarms at h is e^h / 3600 h and the threshold for T hours is ln(3600 T)
-    metrics = {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
-               "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": 100}
+    metrics = _cusum_tail()
     settings = SPEC.resolve(ONE_SPEED, False)
-    nan = np.nan
-    rows = _rows([[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, nan, nan]])
+    rows = _rows(TWO_RECORDS)
     check = long_running_check(rows, metrics, settings)
     running_h = 5.0 / 3600.0                          # 10 whole blocks of 0.5 s
     assert check.running_h == {300.0: running_h} and check.flange_contacts == {300.0: 1}
@@ -113,8 +122,7 @@ def test_delays_at_both_tails_thresholds_by_hand():
     # 2.0 s.  The run's threshold for 100 h is ln(360000) = 12.8 (delay 0.1 s); the tail
     # refitted to the running of test_long_running_check_by_hand, 2 + 1.5 ln(0.2 * 360000 /
     # 0.5) = 19.8, is first reached at 2.0 s (delay 0.5 s)
-    metrics = {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
-               "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": 100}
+    metrics = _cusum_tail()
     settings = SPEC.resolve(ONE_SPEED, False)
     statistic = np.zeros(800)
     statistic[319:] = 15.0                    # row k - 1 is the value after sample k (k dt)
@@ -122,8 +130,7 @@ def test_delays_at_both_tails_thresholds_by_hand():
     run = RecordRun(fault="csaly_0", role="fault", speed_kmh=300.0, seed=0, fault_time_s=1.5,
                     end_s=4.0, flange_contact=False, statistics={"cusum": statistic},
                     post_fault_estimate={}, true_factor_end=0.0)
-    nan = np.nan
-    rows = _rows([[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, nan, nan]])
+    rows = _rows(TWO_RECORDS)
     check = long_running_check(rows, metrics, settings, (run,), monitor_from_s=1.0)
     row = check.delays.set_index("detector").loc["cusum"]
     assert row["fault"] == "csaly_0"
@@ -136,11 +143,9 @@ def test_long_running_facts_by_hand():
     # 20 calibration blocks of 0.5 s (10 s = 1/360 h): 100 h is log10(36000) = 4.56 orders
     # away; the running of test_long_running_check_by_hand (10 blocks, 5 s) log10(72000) =
     # 4.86; half as many blocks
-    metrics = {"tail_level_cusum_300kmh": 0.0, "tail_scale_cusum_300kmh": 1.0,
-               "tail_exceed_cusum_300kmh": 0.5, "tail_blocks_cusum_300kmh": 20}
+    metrics = _cusum_tail(20)
     settings = SPEC.resolve(ONE_SPEED, False)
-    nan = np.nan
-    rows = _rows([[4.0, 3.0, 1.0, 0.5, 0.2, 0.1], [2.0, 1.0, 0.0, 0.0, nan, nan]])
+    rows = _rows(TWO_RECORDS)
     facts = tables.long_running_facts(long_running_check(rows, metrics, settings), metrics,
                                       settings)
     assert facts["orders_run"] == "4.6" and facts["orders_refit"] == "4.9"
