@@ -20,6 +20,8 @@ of both, independent of any detector:
   threshold at a mean time; :func:`shiryaev_roberts_mtbfa_lower_h` — the bound E[T] ≥ A of a
   Shiryaev–Roberts detector with threshold A (Pollak 1987), for a detector whose likelihood
   ratios are exact;
+* :func:`poisson_p_two_sided` and :func:`poisson_count_interval` — a count of alarms against
+  the count a model predicts, and the exact interval of its mean;
 * :func:`poisson_excess_power` and :func:`running_for_power` — how much fault-free running a
   direct check of a tail model needs: the power of the one-sided Poisson test that finds
   ``ratio`` times the alarms the model predicts at a threshold for a given mean time;
@@ -143,6 +145,22 @@ def poisson_excess_power(mean: float | np.ndarray, ratio: float, alpha: float = 
     return float(power) if power.ndim == 0 else power
 
 
+def poisson_p_two_sided(count, mean):
+    """Two-sided p-value of a Poisson count (or an array of counts) of expected ``mean``:
+    ``min(1, 2 min(P(X ≤ k), P(X ≥ k)))``."""
+    count = np.asarray(count)
+    p = np.minimum(1.0, 2.0 * np.minimum(scipy_stats.poisson.cdf(count, mean),
+                                         scipy_stats.poisson.sf(count - 1, mean)))
+    return float(p) if p.ndim == 0 else p
+
+
+def poisson_count_interval(count: int, alpha: float = 0.05) -> tuple[float, float]:
+    """The exact (Garwood) two-sided ``1 − alpha`` interval of a Poisson mean from ``count``
+    events: ``χ²_{α/2}(2k) / 2`` (0 for k = 0) to ``χ²_{1−α/2}(2k + 2) / 2``."""
+    low = float(scipy_stats.chi2.ppf(alpha / 2, 2 * count)) / 2.0 if count else 0.0
+    return low, float(scipy_stats.chi2.ppf(1 - alpha / 2, 2 * (count + 1))) / 2.0
+
+
 def poisson_two_sided_power(mean: float, ratio: float, level: float = 0.05) -> float:
     """Power of the two-sided test that calls a Poisson count of expected ``mean`` inconsistent
     when its p-value ``2 min(P(X ≤ k), P(X ≥ k))`` (capped at 1) is below ``level``, against
@@ -151,9 +169,8 @@ def poisson_two_sided_power(mean: float, ratio: float, level: float = 0.05) -> f
     if mean <= 0 or ratio <= 0:
         raise ValueError("need mean > 0 and ratio > 0")
     counts = np.arange(0, int(ratio * mean + 20 * math.sqrt(ratio * mean) + 50))
-    p = np.minimum(1.0, 2.0 * np.minimum(scipy_stats.poisson.cdf(counts, mean),
-                                         scipy_stats.poisson.sf(counts - 1, mean)))
-    return float(scipy_stats.poisson.pmf(counts, ratio * mean)[p < level].sum())
+    rejected = poisson_p_two_sided(counts, mean) < level
+    return float(scipy_stats.poisson.pmf(counts, ratio * mean)[rejected].sum())
 
 
 def running_for_power(check_mtbfa_h: float, record_s: float, ratio: float = 2.0,
@@ -322,6 +339,6 @@ def detected_within(times: Sequence[float], observed: Sequence[bool], horizon_s:
 __all__ = ["ExponentialTail", "FalseAlarmTime", "MedianDelay", "SECONDS_PER_HOUR", "SurvivalCurve",
            "block_maxima", "cusum_alarms", "cusum_average_run_length", "detected_within",
            "fit_exponential_tail", "kaplan_meier", "kaplan_meier_median",
-           "mean_time_between_false_alarms_h", "poisson_excess_power", "poisson_two_sided_power",
-           "restarted_cusum_alarms",
+           "mean_time_between_false_alarms_h", "poisson_count_interval", "poisson_excess_power",
+           "poisson_p_two_sided", "poisson_two_sided_power", "restarted_cusum_alarms",
            "running_for_power", "shiryaev_roberts_mtbfa_lower_h"]

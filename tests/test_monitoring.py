@@ -15,7 +15,9 @@ from railpaper.monitoring import (
     kaplan_meier,
     kaplan_meier_median,
     mean_time_between_false_alarms_h,
+    poisson_count_interval,
     poisson_excess_power,
+    poisson_p_two_sided,
     poisson_two_sided_power,
     running_for_power,
 )
@@ -198,3 +200,17 @@ def test_poisson_two_sided_power_by_a_brute_force_sum():
     power = sum(pmf(k, 20.0) for k in range(120) if p_value(k, 10.0) < 0.05)
     assert poisson_two_sided_power(10.0, 2.0) == pytest.approx(power, abs=1e-10)
     assert poisson_two_sided_power(10.0, 2.0) < poisson_excess_power(10.0, 2.0)  # 0.025 a side
+
+
+def test_poisson_p_value_and_count_interval_by_hand():
+    # 0 alarms where 5 were expected: P(X <= 0) = e^-5, p = 2 e^-5; 5 of 5: both tails > 1/2
+    assert poisson_p_two_sided(0, 5.0) == pytest.approx(2 * math.exp(-5.0))
+    assert poisson_p_two_sided(5, 5.0) == 1.0
+    assert poisson_p_two_sided(np.array([0, 5]), 5.0).tolist() == pytest.approx(
+        [2 * math.exp(-5.0), 1.0])
+    # Garwood: no event gives [0, -ln 0.025]; k events give the means whose tail beyond k is
+    # 2.5 % each
+    assert poisson_count_interval(0) == pytest.approx((0.0, -math.log(0.025)))
+    low, high = poisson_count_interval(4)
+    assert scipy_stats.poisson.sf(3, low) == pytest.approx(0.025)
+    assert scipy_stats.poisson.cdf(4, high) == pytest.approx(0.025)

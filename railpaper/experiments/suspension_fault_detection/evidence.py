@@ -38,8 +38,6 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-from scipy.stats import chi2 as poisson_distribution_chi2
-from scipy.stats import poisson as poisson_distribution
 
 from railpaper.engine import first_alarm
 from railpaper.experiments.suspension_fault_detection.result import (
@@ -69,6 +67,8 @@ from railpaper.monitoring import (
     fit_exponential_tail,
     kaplan_meier_median,
     mean_time_between_false_alarms_h,
+    poisson_count_interval,
+    poisson_p_two_sided,
     restarted_cusum_alarms,
     shiryaev_roberts_mtbfa_lower_h,
 )
@@ -150,8 +150,7 @@ def false_alarm_metrics(runs: list[RecordRun], detector: str, h: float, first_ro
     maxima = np.array([window_max(r.statistics[detector], first_row) for r in runs])
     alarms = int(np.sum(maxima >= h))
     hours = watched_h(runs, first_row, dt_s)
-    low = poisson_distribution_chi2.ppf(0.025, 2 * alarms) / 2.0 if alarms else 0.0
-    high = poisson_distribution_chi2.ppf(0.975, 2 * (alarms + 1)) / 2.0
+    low, high = poisson_count_interval(alarms)
     return {f"false_alarms_per_hour_{tag}": alarms / hours,
             f"false_alarms_per_hour_{tag}_low": low / hours,
             f"false_alarms_per_hour_{tag}_high": high / hours,
@@ -378,8 +377,7 @@ def tail_check(tail: ExponentialTail, runs: list[RecordRun], detector: str, firs
     h = tail.threshold(mtbfa_h)
     mean = running_h / mtbfa_h
     alarms = int(np.sum(maxima > h))
-    p = min(1.0, 2.0 * min(poisson_distribution.cdf(alarms, mean),
-                           poisson_distribution.sf(alarms - 1, mean)))
+    p = poisson_p_two_sided(alarms, mean)
     return {f"tail_check_mtbfa_h_{tag}": mtbfa_h, f"tail_check_expected_{tag}": mean,
             f"tail_check_alarms_{tag}": alarms, f"tail_check_p_{tag}": p}
 
@@ -556,10 +554,8 @@ def poisson_check(alarms: int, expected: float, running_h: float) -> dict:
     ``running_h`` hours: the mean time between false alarms measured with its exact 95 %
     Poisson interval (h; inf without an alarm / as the upper end), the two-sided p-value and
     the outcome of the rule in this module's docstring."""
-    low_rate = poisson_distribution_chi2.ppf(0.025, 2 * alarms) / 2.0 if alarms else 0.0
-    high_rate = poisson_distribution_chi2.ppf(0.975, 2 * (alarms + 1)) / 2.0
-    p = min(1.0, 2.0 * min(poisson_distribution.cdf(alarms, expected),
-                           poisson_distribution.sf(alarms - 1, expected)))
+    low_rate, high_rate = poisson_count_interval(alarms)
+    p = poisson_p_two_sided(alarms, expected)
     outcome = ("consistent" if p >= RUNNING_CHECK_LEVEL else
                "more alarms" if alarms > expected else "fewer alarms")
     return {"alarms": int(alarms), "expected_alarms": expected,
