@@ -288,13 +288,39 @@ def _innovation_workspace(n, p, nb, gain):  # pragma: no cover - compiled
             np.empty(nb, dtype=np.bool_), np.empty(nb))
 
 
+@numba.njit(fastmath={"contract"}, cache=True)
+def _own_block(F, H, sF, sH, lo, nb):  # pragma: no cover - compiled
+    """A block's own F and H (batch in the last axis), its x and P and the step's scratch
+    (:func:`_innovation_workspace` with the gain, after ``xp`` and ``FP``): what the kernels
+    that run filters over many rows set up once per block."""
+    n, p = F.shape[1], H.shape[1]
+    own = np.arange(lo, lo + nb)                  # the block's own matrices
+    Fl, Hl = np.empty((n, n, nb)), np.empty((p, n, nb))
+    _gather_matrix(F, own, sF, Fl)
+    _gather_matrix(H, own, sH, Hl)
+    work = (np.empty((n, nb)), np.empty((n, n, nb))) + _innovation_workspace(n, p, nb, True)
+    return Fl, Hl, np.empty((n, nb)), np.empty((n, n, nb)), work
+
+
+@numba.njit(fastmath={"contract"}, cache=True)
+def _filter_step(Fl, Hl, xl, Pl, B, sB, u, Q, sQ, hcols, hcount, y, R, sR, lo,
+                 work):  # pragma: no cover - compiled
+    """One predict + update of a block (:func:`_predict_block`, :func:`_innovation_block`,
+    :func:`_posterior_block`) in place on ``xl``, ``Pl``; the log-likelihoods in ``work``'s
+    last array."""
+    xp, FP, HP, S, v, Lc, z, W, logdet, bad, ll = work
+    _predict_block(Fl, xl, Pl, B, sB, u, Q, sQ, lo, xp, FP)                  # x⁻, P⁻
+    _innovation_block(Hl, hcols, hcount, Pl, xp, y, R, sR, lo, True, HP, S, v, Lc, z, W,
+                      logdet, bad, ll)                                      # z, W, log N
+    _posterior_block(xp, W, z, xl, Pl)                                      # x, P
+
+
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True)
 def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, loglik, x_hist,
             var_hist, record, block):  # pragma: no cover - compiled
     """Predict + update (:func:`_predict_block`, :func:`_innovation_block`,
     :func:`_posterior_block`) of every filter over the rows of Y."""
     N, n = x_out.shape
-    p = H.shape[1]
     n_steps = Y.shape[0]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
@@ -302,21 +328,14 @@ def _kf_run(x, P, F, Q, B, U, H, hcols, hcount, R, Y, ancestors, x_out, P_out, l
     for b in numba.prange(n_blocks):
         lo = b * block
         nb = min(block, N - lo)
-        Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
-        xl = np.empty((n, nb))
+        Fl, Hl, xl, Pl, work = _own_block(F, H, sF, sH, lo, nb)
+        ll = work[-1]
         # gather the block once (structure of arrays); x, P from the ancestor: a resampling's
         # copy
         _gather_block(x, P, ancestors[lo:lo + nb], xl, Pl)
-        own = np.arange(lo, lo + nb)              # the block's own matrices
-        _gather_matrix(F, own, sF, Fl)
-        _gather_matrix(H, own, sH, Hl)
-        xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
-        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
         for t in range(n_steps):                  # the block stays in cache over the steps
-            _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
-            _innovation_block(Hl, hcols, hcount, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc,
-                              z, W, logdet, bad, ll)                          # z, W, log N
-            _posterior_block(xp, W, z, xl, Pl)                                # x, P
+            _filter_step(Fl, Hl, xl, Pl, B, sB, U[t], Q, sQ, hcols, hcount, Y[t], R, sR, lo,
+                         work)
             for q in range(nb):
                 loglik[lo + q, t] = ll[q]
             if record:
@@ -335,7 +354,6 @@ def _kf_run_restarting(x_start, P_start, phase, period, F, Q, B, U, H, hcols, hc
     filter starts from row 0's); only the log-likelihoods are kept."""
     N = loglik.shape[0]
     n = x_start.shape[1]
-    p = H.shape[1]
     n_steps = Y.shape[0]
     sF, sQ, sB = int(F.shape[0] > 1), int(Q.shape[0] > 1), int(B.shape[0] > 1)
     sH, sR = int(H.shape[0] > 1), int(R.shape[0] > 1)        # 0: one matrix shared by all
@@ -343,13 +361,8 @@ def _kf_run_restarting(x_start, P_start, phase, period, F, Q, B, U, H, hcols, hc
     for b in numba.prange(n_blocks):
         lo = b * block
         nb = min(block, N - lo)
-        Fl, Pl, Hl = np.empty((n, n, nb)), np.empty((n, n, nb)), np.empty((p, n, nb))
-        xl = np.empty((n, nb))
-        own = np.arange(lo, lo + nb)
-        _gather_matrix(F, own, sF, Fl)
-        _gather_matrix(H, own, sH, Hl)
-        xp, FP = np.empty((n, nb)), np.empty((n, n, nb))
-        HP, S, v, Lc, z, W, logdet, bad, ll = _innovation_workspace(n, p, nb, True)
+        Fl, Hl, xl, Pl, work = _own_block(F, H, sF, sH, lo, nb)
+        ll = work[-1]
         for t in range(n_steps):                  # the block stays in cache over the steps
             for q in range(nb):
                 if t == 0 or t % period == phase[lo + q]:
@@ -357,10 +370,8 @@ def _kf_run_restarting(x_start, P_start, phase, period, F, Q, B, U, H, hcols, hc
                         xl[i, q] = x_start[t, i]
                         for j in range(n):
                             Pl[i, j, q] = P_start[t, i, j]
-            _predict_block(Fl, xl, Pl, B, sB, U[t], Q, sQ, lo, xp, FP)        # x⁻, P⁻
-            _innovation_block(Hl, hcols, hcount, Pl, xp, Y[t], R, sR, lo, True, HP, S, v, Lc,
-                              z, W, logdet, bad, ll)                          # z, W, log N
-            _posterior_block(xp, W, z, xl, Pl)                                # x, P
+            _filter_step(Fl, Hl, xl, Pl, B, sB, U[t], Q, sQ, hcols, hcount, Y[t], R, sR, lo,
+                         work)
             for q in range(nb):
                 loglik[lo + q, t] = ll[q]
 
