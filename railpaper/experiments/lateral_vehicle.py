@@ -143,10 +143,19 @@ def sampled_record(settings: RecordSettings, seed: int, states: np.ndarray, H: n
     measurement changes with θ over the record), white sensor noise (generator ``[seed, 7]``),
     and the input u_k = ẏ_t(t_{k−1}) held over a step."""
     sub = settings.truth_substeps
-    rng = np.random.default_rng([seed, 7])
     x = states[sub::sub][:settings.n_steps]
     y = x @ H.T if H.ndim == 2 else np.einsum("kij,kj->ki", H[:len(x)], x)
-    y = y + rng.standard_normal(y.shape) * noise_std(settings)
+    return noisy_record(settings, seed, y, dq)
+
+
+def noisy_record(settings: RecordSettings, seed: int, y_clean: np.ndarray, dq: np.ndarray
+                 ) -> LateralRecord:
+    """The record of noise-free channels ``y_clean`` (n_steps, 5) at the samples: white sensor
+    noise (generator ``[seed, 7]``, the draws of :func:`sampled_record`) and the input
+    u_k = ẏ_t(t_{k−1}) held over a step."""
+    sub = settings.truth_substeps
+    rng = np.random.default_rng([seed, 7])
+    y = y_clean + rng.standard_normal(y_clean.shape) * noise_std(settings)
     u = dq[0:-1:sub][:settings.n_steps]                   # u_k = ẏt(t_{k-1}), held over the step
     du = np.diff(dq[::sub], axis=0)
     return LateralRecord(seed=seed, y=y, u_mps=u, du_var_m2ps2=du.var(axis=0),
@@ -192,5 +201,6 @@ def filter_system(settings: RecordSettings, fixed: dict, theta: np.ndarray,
 
 
 __all__ = ["LateralRecord", "RecordSettings", "TRACK_AND_SENSORS", "VEHICLE_FILE", "filter_noise",
-           "filter_system", "noise_std", "prior_centre", "sampled_record", "simulate_lateral",
+           "filter_system", "noise_std", "noisy_record", "prior_centre", "sampled_record",
+           "simulate_lateral",
            "track_velocity", "vehicle"]

@@ -144,15 +144,18 @@ def simulate_truth(fixed: dict, theta, speed_mps: float, dt_fine_s: float, u_fin
     u_fine = np.asarray(u_fine, float)
     h = float(dt_fine_s)
     x = np.zeros((len(u_fine) + 1, lateral_16state.N_STATES))
-    f = plant.derivative
     for k, u in enumerate(u_fine):
-        z = x[k]
-        k1 = f(z, u)
-        k2 = f(z + 0.5 * h * k1, u)
-        k3 = f(z + 0.5 * h * k2, u)
-        k4 = f(z + h * k3, u)
-        x[k + 1] = z + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x[k + 1] = rk4_step(plant.derivative, x[k], u, h)
     return x
 
 
-__all__ = ["TruthPlant", "WheelRail", "simulate_truth"]
+def rk4_step(derivative, x: np.ndarray, u: np.ndarray, h: float) -> np.ndarray:
+    """One classical Runge–Kutta step of ``ẋ = derivative(x, u)`` over h, u held."""
+    k1 = derivative(x, u)
+    k2 = derivative(x + 0.5 * h * k1, u)
+    k3 = derivative(x + 0.5 * h * k2, u)
+    k4 = derivative(x + h * k3, u)
+    return x + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+__all__ = ["TruthPlant", "WheelRail", "rk4_step", "simulate_truth"]

@@ -626,7 +626,36 @@ def long_running_check(rows: pd.DataFrame, metrics: dict, settings: Settings,
                             refits=pd.DataFrame(refits), delays=pd.DataFrame(delays))
 
 
+def statistic_peaks(statistic: np.ndarray, first_row: int, block_rows: int) -> str:
+    """A statistic kept as the few samples every metric of a stored ladder rung reads:
+    from ``first_row`` on, each sample that exceeds all before it in the window (so the first
+    sample at or above any threshold is kept, hence every alarm time) and each complete
+    block's largest sample (so every block maximum).  Text ``"row:value row:value …"`` with
+    the values' shortest exact repr; :func:`statistic_from_peaks` reads it back."""
+    x = np.asarray(statistic, float)
+    window = x[first_row:]
+    before = np.concatenate([[-np.inf], np.maximum.accumulate(window)[:-1]]) if window.size \
+        else window
+    rows = set((np.flatnonzero(window > before) + first_row).tolist())
+    blocks = window.size // block_rows
+    if blocks:
+        peaks = window[:blocks * block_rows].reshape(blocks, block_rows).argmax(axis=1)
+        rows.update((first_row + np.arange(blocks) * block_rows + peaks).tolist())
+    return " ".join(f"{r}:{float(x[r])!r}" for r in sorted(rows))
+
+
+def statistic_from_peaks(text: str, length: int) -> np.ndarray:
+    """The statistic of :func:`statistic_peaks` with −inf wherever a sample was not kept:
+    its window maximum, block maxima and first crossing of every threshold are the
+    original's."""
+    out = np.full(length, -np.inf)
+    for item in text.split():
+        row, value = item.split(":")
+        out[int(row)] = float(value)
+    return out
+
+
 __all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median", "delay_curve_rows",
            "evidence", "false_alarm_tail", "isolation_metrics", "long_running_check",
            "operating_point_metrics", "paired_comparisons", "paired_metrics", "poisson_check",
-           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]
+           "statistic_from_peaks", "statistic_peaks", "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

@@ -23,6 +23,7 @@ One record by hand::
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -36,6 +37,8 @@ from railpaper.experiments.suspension_fault_detection.evidence import (
     evidence,
     false_alarm_metrics,
     fault_metrics,
+    statistic_from_peaks,
+    statistic_peaks,
     window_rows,
 )
 from railpaper.experiments.suspension_fault_detection.result import (
@@ -51,6 +54,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     RUNGS_WITHOUT_TRACK,
+    STORED_RUNGS,
     TRACK_UNKNOWN_FAULT_SHARE,
     Settings,
 )
@@ -174,17 +178,18 @@ def track_model(settings: Settings, fixed: dict, speed_kmh: float
 
 def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
                fault: Fault | None, role: str, speed_kmh: float, seed: int, values: np.ndarray,
-               bank: detectors.BankHypotheses, track: tuple | None = None
-               ) -> tuple[RecordRun, dict]:
+               bank: detectors.BankHypotheses, track: tuple | None = None,
+               model_error: faults.ModelError | None = None) -> tuple[RecordRun, dict]:
     """Simulate one record and run the detectors on it: the record's :class:`RecordRun` and
     what the illustration needs (the oracle's posterior).  ``fault_settings`` are the
     catalogue's (:func:`.faults.catalogue`), ``values`` the oracle's hypotheses and ``bank``
     those of ``glr`` and ``bayes``; with ``track`` (:func:`track_model`) the filters are not
-    given the track input and estimate it."""
+    given the track input and estimate it; with ``model_error`` the truth has it
+    (:func:`.records.simulate_faulted`) and the filters do not."""
     grid_s = faults.fault_times_s(fault_settings)
     tau = fault_time(settings, grid_s, seed) if fault is not None else -1.0
     rec = records.simulate_faulted(settings, fault_settings, fixed, theta, fault, max(tau, 0.0),
-                                   speed_kmh, seed)
+                                   speed_kmh, seed, model_error)
     system = filter_system(records.record_settings(settings, speed_kmh), fixed, theta,
                            rec.record, theta_ref=theta)
     if track is not None:
@@ -263,6 +268,58 @@ def _kept(metrics: dict, prefix: str) -> dict:
             if k.startswith(LADDER_KEPT) and (point in k or k.startswith("tail_check_p_"))}
 
 
+@dataclass(frozen=True)
+class RungAtIdealThresholds:
+    """A rung's records at the ideal rung's thresholds: metrics
+    (``ladder_<rung>_ideal_thresholds_…``) and the ladder table's rows."""
+
+    metrics: dict
+    rows: list
+
+
+def rung_evidence(rung: str, records_: list[RecordRun], settings: Settings,
+                  chosen: list[Fault], ideal_thresholds: dict, bank_parameter: np.ndarray,
+                  prefix: str = "ladder_") -> tuple[dict, RungAtIdealThresholds]:
+    """One ladder rung's evidence (:func:`.evidence.evidence` on its records at
+    ``ladder_speed_kmh``, thresholds recalibrated on its own fault-free records) and, given
+    the ideal rung's thresholds for :data:`LADDER_MTBFA_H` hours (``{detector: threshold}``,
+    empty for the ideal rung itself), the rung's false alarms and detections at them, with one
+    ladder-table row per (detector, fault)."""
+    _, fault_settings = faults.catalogue()
+    speed = settings.ladder_speed_kmh
+    monitor_from = float(faults.fault_times_s(fault_settings)[0])
+    first_row = window_rows(settings.dt_s, monitor_from)
+    sk = speed_key(speed)
+    fault_parameter = {f.name: lateral_16state.PARAM_NAMES.index(f.parameter) for f in chosen}
+    m, _, _, _ = evidence(records_, list(DETECTORS), (speed,), [f.name for f in chosen],
+                          settings, settings.dt_s, monitor_from, bank_parameter, fault_parameter)
+    metrics, rows = {}, []
+    free = [r for r in records_ if r.role == "evaluation"]
+    for det in DETECTORS:
+        h_ideal = ideal_thresholds.get(det)
+        if h_ideal is not None and free:
+            fa = false_alarm_metrics(free, det, h_ideal, first_row, settings.dt_s, f"{det}_{sk}")
+            metrics.update({f"{prefix}{rung}_ideal_thresholds_{k}": v for k, v in fa.items()})
+        for f in chosen:
+            tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
+            row = {"rung": rung, "detector": det, "fault": f.name,
+                   "km_delay_median_s": m.get(f"km_delay_median_s_{tag}", np.nan),
+                   "detected_within_0.5s": m.get(f"detected_within_0.5s_{tag}", np.nan),
+                   "detected_within_2s": m.get(f"detected_within_2s_{tag}", np.nan),
+                   "detected_within_2s_at_ideal_thresholds": np.nan}
+            runs_ = [r for r in records_ if r.fault == f.name]
+            if h_ideal is not None and runs_:
+                outcomes = detector_outcomes(runs_, det, h_ideal, first_row, settings.dt_s)
+                at_ideal = fault_metrics(outcomes, tag)
+                metrics.update({f"{prefix}{rung}_ideal_thresholds_{k}": v
+                                for k, v in at_ideal.items()
+                                if k.startswith("detected_within_2s_")})
+                row["detected_within_2s_at_ideal_thresholds"] = \
+                    at_ideal[f"detected_within_2s_{tag}"]
+            rows.append(row)
+    return m, RungAtIdealThresholds(metrics, rows)
+
+
 def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
            chosen: list[Fault], values: np.ndarray, bank, ideal: list[RecordRun],
            progress) -> tuple[dict, pd.DataFrame]:
@@ -281,8 +338,6 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
     speed = settings.ladder_speed_kmh
     items = _ladder_items(settings, chosen)
     by_name = {f.name: f for f in chosen}
-    fault_parameter = {f.name: lateral_16state.PARAM_NAMES.index(f.parameter) for f in chosen}
-    grid_s = faults.fault_times_s(fault_settings)
     wanted = {(fault, role, seed) for fault, role, seed in items}
     rungs = {"ideal": [r for r in ideal if r.speed_kmh == speed
                        and (r.fault, r.role, r.seed) in wanted]}
@@ -299,42 +354,16 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
             run_, _ = run_record(worse, fault_settings, fixed, theta, by_name.get(fault_name),
                                  role, speed, seed, values, bank, track)
             rungs[rung].append(run_)
-    monitor_from = float(grid_s[0])
-    first_row = window_rows(settings.dt_s, monitor_from)
-    sk = speed_key(speed)
     metrics, rows, ideal_thresholds = {}, [], {}
     for rung, records_ in rungs.items():
-        m, _, _, _ = evidence(records_, list(DETECTORS), (speed,), [f.name for f in chosen],
-                              settings, settings.dt_s, monitor_from, bank.parameter,
-                              fault_parameter)
+        m, r = rung_evidence(rung, records_, settings, chosen, ideal_thresholds, bank.parameter)
         metrics.update(_kept(m, f"ladder_{rung}_"))
+        metrics.update(r.metrics)
+        rows += r.rows
         if rung == "ideal":
+            sk = speed_key(speed)
             ideal_thresholds = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}")
                                 for d in DETECTORS}
-        free = [r for r in records_ if r.role == "evaluation"]
-        for det in DETECTORS:
-            h_ideal = ideal_thresholds.get(det)
-            if rung != "ideal" and h_ideal is not None and free:
-                fa = false_alarm_metrics(free, det, h_ideal, first_row, settings.dt_s,
-                                         f"{det}_{sk}")
-                metrics.update({f"ladder_{rung}_ideal_thresholds_{k}": v for k, v in fa.items()})
-            for f in chosen:
-                tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
-                row = {"rung": rung, "detector": det, "fault": f.name,
-                       "km_delay_median_s": m.get(f"km_delay_median_s_{tag}", np.nan),
-                       "detected_within_0.5s": m.get(f"detected_within_0.5s_{tag}", np.nan),
-                       "detected_within_2s": m.get(f"detected_within_2s_{tag}", np.nan),
-                       "detected_within_2s_at_ideal_thresholds": np.nan}
-                runs_ = [r for r in records_ if r.fault == f.name]
-                if rung != "ideal" and h_ideal is not None and runs_:
-                    outcomes = detector_outcomes(runs_, det, h_ideal, first_row, settings.dt_s)
-                    at_ideal = fault_metrics(outcomes, tag)
-                    metrics.update({f"ladder_{rung}_ideal_thresholds_{k}": v
-                                    for k, v in at_ideal.items()
-                                    if k.startswith("detected_within_2s_")})
-                    row["detected_within_2s_at_ideal_thresholds"] = \
-                        at_ideal[f"detected_within_2s_{tag}"]
-                rows.append(row)
     return metrics, pd.DataFrame(rows)
 
 
@@ -477,14 +506,134 @@ def running_rows(settings: Settings, seeds) -> pd.DataFrame:
 FAULT_FREE_RUNNING = RecordStudy(
     "suspension-fault-detection", "fault_free_running", running_rows, chunk_records=8,
     first_record=first_running_seed)
+#: The stored ladder rungs' record roles besides the faults: a fault-free record of seed
+#: ``seed + offset + i`` each (:data:`FREE_SEED_OFFSETS`).
+STORED_FREE_ROLES = tuple(FREE_SEED_OFFSETS)
+
+
+def stored_ladder_item(settings: Settings, record: int) -> tuple[str, str, str, int]:
+    """What record ``record`` of the study ``stored_ladder`` is (it counts from ``seed``):
+    ``(rung, key, role, record seed)``.  Per i = 0, 1, …, for each rung of
+    :data:`STORED_RUNGS`: the record of seed ``seed`` + i of every fault (key: the fault's
+    name), then the fault-free ones of seeds ``seed`` + 300 + i (calibration) and
+    ``seed`` + 600 + i (evaluation)."""
+    keys = [(f.name, "fault", 0) for f in chosen_faults(settings)] + [
+        (role, role, FREE_SEED_OFFSETS[role]) for role in STORED_FREE_ROLES]
+    j = int(record) - settings.seed
+    i, rest = divmod(j, len(STORED_RUNGS) * len(keys))
+    rung = list(STORED_RUNGS)[rest // len(keys)]
+    key, role, offset = keys[rest % len(keys)]
+    return rung, key, role, settings.seed + offset + i
+
+
+def stored_ladder_rows(settings: Settings, records_) -> pd.DataFrame:
+    """The stored ladder rungs (study ``stored_ladder``, :data:`STORED_RUNGS`) at
+    ``ladder_speed_kmh``, one row per record (:func:`stored_ladder_item`): the detectors run on
+    it as on the run's ladder, each statistic kept as :func:`.evidence.statistic_peaks`
+    (``<detector>_peaks``), with ``rung``, ``record`` (the fault's name or the fault-free
+    role), ``record_seed``, ``fault_time_s``, ``end_s`` and ``flange_contact``: all that
+    :func:`stored_ladder` reads."""
+    fixed, theta = vehicle()
+    _, fault_settings = faults.catalogue()
+    chosen = {f.name: f for f in chosen_faults(settings)}
+    _, values = detectors.oracle_hypotheses(list(chosen.values()), theta)
+    bank = detectors.bank_hypotheses(theta, faults.bayes_factors())
+    first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
+    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    speed = settings.ladder_speed_kmh
+    truth_error = faults.model_error()
+    rows = []
+    with one_thread():
+        for record in records_:
+            rung, key, role, record_seed = stored_ladder_item(settings, record)
+            _, overrides, with_error = STORED_RUNGS[rung]
+            worse = settings.replace(**overrides)
+            run_, _ = run_record(worse, fault_settings, fixed, theta, chosen.get(key), role,
+                                 speed, record_seed, values, bank,
+                                 track_model(worse, fixed, speed),
+                                 truth_error if with_error else None)
+            row = {"seed": int(record), "rung": rung, "record": key,
+                   "record_seed": record_seed, "fault_time_s": run_.fault_time_s,
+                   "end_s": run_.end_s, "flange_contact": bool(run_.flange_contact)}
+            for detector in DETECTORS:
+                row[f"{detector}_peaks"] = statistic_peaks(run_.statistics[detector],
+                                                           first_row, block_rows)
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> list[RecordRun]:
+    """The records of one stored rung (:func:`stored_ladder_rows`) as :class:`RecordRun`
+    whose statistics keep only their peaks (:func:`.evidence.statistic_from_peaks`: every
+    threshold, block maximum and alarm time the rung's evidence reads is the original's; no
+    estimates, no GLR hypotheses)."""
+    out = []
+    for row in rows[rows["rung"] == rung].to_dict("records"):
+        length = int(round(row["end_s"] / settings.dt_s))
+        role = row["record"] if row["record"] in STORED_FREE_ROLES else "fault"
+        out.append(RecordRun(
+            fault=row["record"] if role == "fault" else NO_FAULT, role=role,
+            speed_kmh=settings.ladder_speed_kmh, seed=int(row["record_seed"]),
+            fault_time_s=float(row["fault_time_s"]), end_s=float(row["end_s"]),
+            flange_contact=bool(row["flange_contact"]),
+            statistics={d: statistic_from_peaks(str(row[f"{d}_peaks"]), length)
+                        for d in DETECTORS},
+            post_fault_estimate={}, true_factor_end=np.nan,
+            bank_hypothesis=np.full(length, -1)))
+    return out
+
+
+def stored_ladder(rows: pd.DataFrame, settings: Settings, metrics: dict
+                  ) -> tuple[dict, pd.DataFrame]:
+    """The stored rungs' evidence, as the run's ladder computes its own
+    (:func:`rung_evidence`, thresholds for :data:`LADDER_MTBFA_H` hours recalibrated on each
+    rung's fault-free records; the ideal rung's thresholds read from the run's ``metrics``):
+    metrics ``stored_ladder_<rung>_<metric>`` (:data:`LADDER_KEPT`, and at the ideal
+    thresholds) and the ladder table's rows, with the records per fault in ``records``."""
+    sk = speed_key(settings.ladder_speed_kmh)
+    ideal = {d: metrics[f"ladder_ideal_threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}"]
+             for d in DETECTORS
+             if f"ladder_ideal_threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}" in metrics}
+    bank = detectors.bank_hypotheses(vehicle()[1], faults.bayes_factors())
+    chosen = chosen_faults(settings)
+    out, table = {}, []
+    for rung in STORED_RUNGS:
+        records_ = stored_ladder_records(rows, settings, rung)
+        if not records_:
+            continue
+        m, at_ideal = rung_evidence(rung, records_, settings, chosen, ideal, bank.parameter,
+                                    prefix="stored_ladder_")
+        out.update(_kept(m, f"stored_ladder_{rung}_"))
+        out.update(at_ideal.metrics)
+        per_fault = {f.name: sum(r.fault == f.name for r in records_) for f in chosen}
+        table += [dict(r, records=per_fault[r["fault"]]) for r in at_ideal.rows]
+    return out, pd.DataFrame(table)
+
+
+#: The stored ladder rungs (:data:`STORED_RUNGS`), computed once into the stored evidence
+#: like the long running (:func:`stored_ladder_rows`).
+STORED_LADDER = RecordStudy(
+    "suspension-fault-detection", "stored_ladder", stored_ladder_rows, chunk_records=7)
 #: The appendix's per-record studies.
-STUDIES = (FAULT_FREE_RUNNING,)
+STUDIES = (FAULT_FREE_RUNNING, STORED_LADDER)
+
+
+def stored_ladder_size(settings: Settings) -> int:
+    """Records of the study ``stored_ladder``: on each stored rung the run's
+    ``records_per_fault`` records of every fault and as many fault-free records of each role
+    (the run's ``fault_free_records`` in all), so the stored rungs are paired record by record
+    with the run's records at the ladder's speed.  Not sized by power: no finding reads
+    them; the page gives their intervals."""
+    return (settings.records_per_fault * len(STORED_RUNGS)
+            * (len(chosen_faults(settings)) + len(STORED_FREE_ROLES)))
 
 
 def stored_sizes(settings: Settings) -> dict[str, int]:
     """Records of each stored study the decisive run computes (no declared rows decide this
-    appendix; its sizes are fixed here by :func:`running_records`)."""
-    return {FAULT_FREE_RUNNING.name: running_records(settings)}
+    appendix; its sizes are fixed here by :func:`running_records` and
+    :func:`stored_ladder_size`)."""
+    return {FAULT_FREE_RUNNING.name: running_records(settings),
+            STORED_LADDER.name: stored_ladder_size(settings)}
 
 
 def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
@@ -498,7 +647,10 @@ def _timeseries(ill: IllustratedRecord) -> pd.DataFrame:
     return out
 
 
-__all__ = ["FAULT_FREE_RUNNING", "LADDER_KEPT", "RUNNING_POWER_CHECK_H", "RUNNING_SEED_OFFSET",
-           "STUDIES", "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan",
-           "run", "run_record", "running_records", "running_rows", "stored_sizes",
-           "track_model", "track_unknown_fault_records", "validate", "window_steps"]
+__all__ = ["FAULT_FREE_RUNNING", "LADDER_KEPT", "RUNNING_POWER_CHECK_H",
+           "RUNNING_SEED_OFFSET", "RungAtIdealThresholds", "STORED_LADDER", "STUDIES",
+           "chosen_faults", "first_running_seed", "ladder", "monitored_s", "plan",
+           "run", "run_record", "rung_evidence", "running_records", "running_rows",
+           "stored_ladder", "stored_ladder_records", "stored_ladder_item", "stored_ladder_size",
+           "stored_ladder_rows", "stored_sizes", "track_model",
+           "track_unknown_fault_records", "validate", "window_steps"]

@@ -5,6 +5,8 @@ below after it."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
@@ -12,6 +14,7 @@ from railpaper.data import DataError, load_quantities, read_toml
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
 from railpaper.experiments.suspension_fault_detection.spec import CRITICAL_SEARCH_TOP_KMH, SPEC
 from railpaper.models import lateral_16state
+from railpaper.models.lateral_truth import WheelRail
 from railpaper.paths import DATA_DIR
 
 FAULTS_FILE = DATA_DIR / SPEC.name / "faults.toml"
@@ -19,6 +22,10 @@ FAULTS_FILE = DATA_DIR / SPEC.name / "faults.toml"
 SETTINGS = ("drift_s", "drift_pieces", "fault_time_first_s", "fault_time_last_s",
             "fault_time_spacing_s", "p_no_fault", "flange_clearance_m")
 KINDS = ("abrupt", "drift")
+MODEL_ERROR_FILE = DATA_DIR / SPEC.name / "model_error.toml"
+#: The contact nonlinearities of the ladder's last rung: chapter 003's truth plant's
+#: (``data/rbpf-parameter-estimation/mismatch.toml``).
+CONTACT_FILE = DATA_DIR / "rbpf-parameter-estimation" / "mismatch.toml"
 #: Speeds searched for the critical speed, km/h.
 CRITICAL_SEARCH_KMH = np.arange(100.0, CRITICAL_SEARCH_TOP_KMH + 1e-9, 2.5)
 
@@ -40,6 +47,43 @@ def catalogue(path=FAULTS_FILE) -> tuple[dict[str, Fault], dict[str, float]]:
         faults[name] = fault
     quantities = load_quantities(path, SETTINGS, section="settings")
     return faults, {k: float(q.value) for k, q in quantities.items()}
+
+
+@dataclass(frozen=True)
+class ModelError:
+    """What the ladder's last rung's truth has that the filters' model does not
+    (:mod:`railpaper.models.lateral_model_error`).
+
+    Attributes
+    ----------
+    wheel_rail : WheelRail
+        Saturating creep and the nonlinear rolling-radius difference (chapter 003's).
+    conicity_factor : float
+        The truth's small-amplitude conicity over the filters' nominal one, 1.
+    series_stiffness_N_per_m : float
+        The anti-yaw dampers' series stiffness, N/m.
+    """
+
+    wheel_rail: WheelRail
+    conicity_factor: float
+    series_stiffness_N_per_m: float
+
+    def truth_theta(self, theta: np.ndarray) -> np.ndarray:
+        """The truth's θ: the filters' with the conicity scaled."""
+        out = np.array(theta, float)
+        out[lateral_16state.PARAM_NAMES.index("lambda")] *= self.conicity_factor
+        return out
+
+
+def model_error(path=MODEL_ERROR_FILE, contact_path=CONTACT_FILE) -> ModelError:
+    """The last rung's :class:`ModelError` from its data files."""
+    own = load_quantities(path, ("conicity_factor", "series_stiffness"))
+    contact = load_quantities(contact_path)
+    wheel_rail = WheelRail(float(contact["friction_coefficient"].value),
+                           float(contact["wheel_load"].value),
+                           float(contact["conicity_length_scale"].value))
+    return ModelError(wheel_rail, float(own["conicity_factor"].value),
+                      float(own["series_stiffness"].value))
 
 
 def bayes_factors(path=FAULTS_FILE) -> np.ndarray:
@@ -118,5 +162,6 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
     return pd.DataFrame(rows)
 
 
-__all__ = ["FAULTS_FILE", "SETTINGS", "bayes_factors", "catalogue", "critical_speeds", "factor_at",
-           "fault_times_s", "schedule"]
+__all__ = ["CONTACT_FILE", "FAULTS_FILE", "MODEL_ERROR_FILE", "ModelError", "SETTINGS",
+           "bayes_factors", "catalogue", "critical_speeds", "factor_at", "fault_times_s",
+           "model_error", "schedule"]

@@ -19,13 +19,14 @@ import numpy as np
 from railpaper.experiments.lateral_vehicle import (
     LateralRecord,
     RecordSettings,
+    noisy_record,
     sampled_record,
     track_velocity,
 )
 from railpaper.experiments.suspension_fault_detection import faults
 from railpaper.experiments.suspension_fault_detection.result import Fault
 from railpaper.experiments.suspension_fault_detection.spec import Settings
-from railpaper.models import lateral_16state
+from railpaper.models import lateral_16state, lateral_model_error
 
 
 @dataclass(frozen=True)
@@ -61,26 +62,58 @@ def record_settings(settings: Settings, speed_kmh: float) -> RecordSettings:
                              n_steps=int(round(settings.duration_s / settings.dt_s)))
 
 
+def _model_error_truth(model_error: faults.ModelError, fixed: dict, thetas, starts, v: float,
+                       dt_fine: float, dq: np.ndarray, piece: np.ndarray, sub: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Fine-grid states (K_fine + 1, 17) of the plant with model error and its noise-free
+    channels at the samples (n_steps, 5), each sample read with the θ of the transition that
+    ended there."""
+    states = lateral_model_error.simulate_schedule(
+        fixed, thetas, starts, v, dt_fine, dq[:-1], model_error.wheel_rail,
+        model_error.series_stiffness_N_per_m)
+    x = states[sub::sub][:len(piece)]
+    y_clean = np.empty((len(x), len(lateral_16state.CHANNELS)))
+    for i, th in enumerate(thetas):
+        rows = piece[:len(x)] == i
+        if rows.any():
+            plant = lateral_model_error.ModelErrorPlant(fixed, th, v, model_error.wheel_rail,
+                                                        model_error.series_stiffness_N_per_m)
+            y_clean[rows] = plant.measurements(x[rows])
+    return states, y_clean
+
+
 def simulate_faulted(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndarray,
-                     fault: Fault | None, fault_time_s: float, speed_kmh: float, seed: int
-                     ) -> FaultedRecord:
+                     fault: Fault | None, fault_time_s: float, speed_kmh: float, seed: int,
+                     model_error: faults.ModelError | None = None) -> FaultedRecord:
     """The record of ``seed`` at ``speed_kmh`` with ``fault`` from ``fault_time_s`` on (None:
     fault-free); sensor noise and track as chapter 003's records.  ``fault_settings`` are the
-    catalogue's (:func:`~railpaper.experiments.suspension_fault_detection.faults.catalogue`)."""
+    catalogue's (:func:`~railpaper.experiments.suspension_fault_detection.faults.catalogue`).
+    With ``model_error`` the truth is :mod:`railpaper.models.lateral_model_error` with θ of
+    :meth:`~.faults.ModelError.truth_theta` (the fault acts on it); ``factor`` is then relative
+    to the truth's nominal value."""
     rs = record_settings(settings, speed_kmh)
     sub, K = rs.truth_substeps, rs.n_steps
     dt_fine = rs.dt_s / sub
     dq = track_velocity(rs, fixed, seed)
     fault_sample = int(round(fault_time_s / rs.dt_s)) if fault is not None else K
+    if model_error is not None:
+        theta = model_error.truth_theta(theta)
     thetas, starts = faults.schedule(fault, fault_settings, theta, fault_sample * sub, K * sub,
                                      dt_fine)
     v = speed_kmh / 3.6
-    states = lateral_16state.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine, dq[:-1])
-    H_pieces = np.stack([lateral_16state.measurement_matrix(
-        lateral_16state.build_A_direct(fixed, th, v)) for th in thetas])
     piece = np.searchsorted(np.asarray(starts), np.arange(1, K + 1) * sub, side="left") - 1
-    record = sampled_record(rs, seed, states, H_pieces[piece], dq)
-    contact = lateral_16state.flange_contact_step(states, fault_settings["flange_clearance_m"])
+    if model_error is None:
+        states = lateral_16state.simulate_truth_schedule(fixed, thetas, starts, v, dt_fine,
+                                                         dq[:-1])
+        H_pieces = np.stack([lateral_16state.measurement_matrix(
+            lateral_16state.build_A_direct(fixed, th, v)) for th in thetas])
+        record = sampled_record(rs, seed, states, H_pieces[piece], dq)
+    else:
+        states, y_clean = _model_error_truth(model_error, fixed, thetas, starts, v, dt_fine,
+                                             dq, piece, sub)
+        record = noisy_record(rs, seed, y_clean, dq)
+    contact = lateral_16state.flange_contact_step(states[:, :lateral_16state.N_STATES],
+                                                  fault_settings["flange_clearance_m"])
     end = K if contact < 0 else min(K, (contact - 1) // sub)
     if end < K:
         record = record.first_steps(end)

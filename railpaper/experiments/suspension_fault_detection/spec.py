@@ -115,6 +115,18 @@ RUNGS_WITHOUT_TRACK = ("track_unknown",)
 #: times as much per record, and the book's ten minutes pay for half of them; their
 #: fault-free records, which set their thresholds, are all kept.
 TRACK_UNKNOWN_FAULT_SHARE = 0.5
+#: The rungs the stored evidence holds at the run's own sizes, beyond what the book's run
+#: can afford (study ``stored_ladder``): the track-unknown rung, which the run's ladder holds
+#: at a quarter of the run's fault records, and the last rung, the same filters on a truth
+#: with model error they do not know (:mod:`railpaper.models.lateral_model_error`: saturating
+#: creep, a nonlinear and larger conicity, a series stiffness in the anti-yaw damper;
+#: ``data/suspension-fault-detection/model_error.toml``).  Each: (description, sensor
+#: settings, whether the truth has the model error); both estimate the track.
+STORED_RUNGS = {"track_unknown": (LADDER["track_unknown"][0], LADDER["track_unknown"][1],
+                                  False),
+                "model_error": ("bogie and car-body accelerometers only, the track input "
+                                "unknown, the truth with model error",
+                                LADDER["track_unknown"][1], True)}
 #: The operating point the page's delay tables read, h between false alarms.
 OPERATING_POINT_H = 100.0
 #: The paired comparisons at the operating point (A, B): the Bayesian detector against each
@@ -136,5 +148,5 @@ MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
 __all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
            "MTBFA_TARGETS_H", "OPERATING_POINT_H", "PAIRS", "RUNNING_CHECK_H",
-           "RUNNING_CHECK_LEVEL", "RUNGS_WITHOUT_TRACK", "SPEC", "Settings",
+           "RUNNING_CHECK_LEVEL", "RUNGS_WITHOUT_TRACK", "SPEC", "STORED_RUNGS", "Settings",
            "TRACK_UNKNOWN_FAULT_SHARE", "WITHIN_S"]
