@@ -135,7 +135,14 @@ def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray) -> tuple[np.ndarr
 
     The crossing is interpolated linearly between grid speeds.
     """
-    re = np.array([least_damped(build_A_direct(fixed, theta, v))[0] for v in speeds_mps])
+    return first_unstable_speed(lambda v: build_A_direct(fixed, theta, v), speeds_mps)
+
+
+def first_unstable_speed(matrix_at, speeds_mps: np.ndarray) -> tuple[np.ndarray, float]:
+    """:func:`critical_speed` of any system matrix ``matrix_at(speed_mps)``: the least-damped
+    real part over ``speeds_mps`` and the first speed (m/s) where it crosses 0 (-1: none),
+    interpolated linearly between grid speeds."""
+    re = np.array([least_damped(matrix_at(v))[0] for v in speeds_mps])
     above = np.nonzero(re > 0)[0]
     if above.size == 0:
         return re, -1.0

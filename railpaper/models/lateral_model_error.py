@@ -104,6 +104,15 @@ def linear_matrix(fixed: dict, theta, speed_mps: float,
     return A
 
 
+def critical_speed(fixed: dict, theta, speeds_mps: np.ndarray,
+                   series_stiffness_N_per_m: float) -> tuple[np.ndarray, float]:
+    """The linearised plant's (:func:`linear_matrix`) least-damped real part over
+    ``speeds_mps`` and the first speed (m/s) where it crosses 0 (-1: none), as
+    :func:`railpaper.models.lateral_16state.critical_speed`."""
+    return lateral_16state.first_unstable_speed(
+        lambda v: linear_matrix(fixed, theta, v, series_stiffness_N_per_m), speeds_mps)
+
+
 def simulate_schedule(fixed: dict, thetas, starts, speed_mps: float, dt_fine_s: float,
                       u_fine: np.ndarray, wheel_rail: WheelRail,
                       series_stiffness_N_per_m: float) -> np.ndarray:
@@ -126,5 +135,5 @@ def simulate_schedule(fixed: dict, thetas, starts, speed_mps: float, dt_fine_s: 
     return x
 
 
-__all__ = ["DAMPER_FORCE_STATE", "N_STATES", "ModelErrorPlant", "linear_matrix",
+__all__ = ["DAMPER_FORCE_STATE", "N_STATES", "ModelErrorPlant", "critical_speed", "linear_matrix",
            "simulate_schedule"]

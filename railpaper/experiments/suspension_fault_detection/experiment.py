@@ -583,30 +583,39 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
     return out
 
 
-def stored_ladder(rows: pd.DataFrame, settings: Settings, metrics: dict
+def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[RecordRun]
                   ) -> tuple[dict, pd.DataFrame]:
-    """The stored rungs' evidence, as the run's ladder computes its own
-    (:func:`rung_evidence`, thresholds for :data:`LADDER_MTBFA_H` hours recalibrated on each
-    rung's fault-free records; the ideal rung's thresholds read from the run's ``metrics``):
-    metrics ``stored_ladder_<rung>_<metric>`` (:data:`LADDER_KEPT`, and at the ideal
-    thresholds) and the ladder table's rows, with the records per fault in ``records``."""
-    sk = speed_key(settings.ladder_speed_kmh)
-    ideal = {d: metrics[f"ladder_ideal_threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}"]
-             for d in DETECTORS
-             if f"ladder_ideal_threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}" in metrics}
+    """The stored rungs' evidence beside the ideal rung of the run's own records at
+    ``ladder_speed_kmh`` (all of them: the same seeds as the stored rungs'), each as the run's
+    ladder computes its rungs (:func:`rung_evidence`: thresholds for :data:`LADDER_MTBFA_H`
+    hours recalibrated on the rung's fault-free records, and the ideal rung's applied):
+    metrics ``stored_ladder_<rung>_<metric>`` (:data:`LADDER_KEPT` and at the ideal
+    thresholds) and the ladder table's rows, with the records per fault (``records``) and the
+    fault records that ended before their fault (``ended_before_fault``)."""
+    speed = settings.ladder_speed_kmh
+    sk = speed_key(speed)
     bank = detectors.bank_hypotheses(vehicle()[1], faults.bayes_factors())
     chosen = chosen_faults(settings)
-    out, table = {}, []
-    for rung in STORED_RUNGS:
-        records_ = stored_ladder_records(rows, settings, rung)
+    rungs = {"ideal": [r for r in run_records if r.speed_kmh == speed]}
+    rungs.update({rung: stored_ladder_records(rows, settings, rung) for rung in STORED_RUNGS})
+    out, table, ideal = {}, [], {}
+    for rung, records_ in rungs.items():
         if not records_:
             continue
         m, at_ideal = rung_evidence(rung, records_, settings, chosen, ideal, bank.parameter,
                                     prefix="stored_ladder_")
         out.update(_kept(m, f"stored_ladder_{rung}_"))
         out.update(at_ideal.metrics)
-        per_fault = {f.name: sum(r.fault == f.name for r in records_) for f in chosen}
-        table += [dict(r, records=per_fault[r["fault"]]) for r in at_ideal.rows]
+        if rung == "ideal":
+            ideal = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}") for d in DETECTORS}
+        free = [r for r in records_ if r.fault == NO_FAULT]
+        out[f"stored_ladder_{rung}_fault_free_flange_contacts"] = sum(
+            r.flange_contact for r in free)
+        out[f"stored_ladder_{rung}_fault_free_records"] = len(free)
+        for row in at_ideal.rows:
+            runs_ = [r for r in records_ if r.fault == row["fault"]]
+            table.append(dict(row, records=len(runs_), ended_before_fault=sum(
+                r.end_s <= r.fault_time_s for r in runs_)))
     return out, pd.DataFrame(table)
 
 

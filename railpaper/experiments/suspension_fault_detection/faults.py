@@ -13,7 +13,7 @@ import pandas as pd
 from railpaper.data import DataError, load_quantities, read_toml
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT, Fault
 from railpaper.experiments.suspension_fault_detection.spec import CRITICAL_SEARCH_TOP_KMH, SPEC
-from railpaper.models import lateral_16state
+from railpaper.models import lateral_16state, lateral_model_error
 from railpaper.models.lateral_truth import WheelRail
 from railpaper.paths import DATA_DIR
 
@@ -162,6 +162,31 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
     return pd.DataFrame(rows)
 
 
+
+def model_error_summary(fixed: dict, theta: np.ndarray, model_error: ModelError) -> dict:
+    """What the page says of the truth with model error, SI units: ``friction``,
+    ``conicity_scale_m``, ``conicity`` (the truth's) and ``conicity_filters``,
+    ``series_stiffness_N_per_m``, ``maxwell_time_s`` (C_saly / K_s at the nominal damping), and
+    the linearised truth's critical speed, km/h, fault-free and with the anti-yaw damping halved
+    (``critical_speed_kmh``, ``critical_speed_csaly_half_kmh``; NaN: stable to the search's
+    end)."""
+    truth = model_error.truth_theta(theta)
+    j_lambda, j_csaly = (lateral_16state.PARAM_NAMES.index(n) for n in ("lambda", "csaly"))
+    half = truth.copy()
+    half[j_csaly] *= 0.5
+    speeds = {}
+    for key, th in (("critical_speed_kmh", truth), ("critical_speed_csaly_half_kmh", half)):
+        _, v = lateral_model_error.critical_speed(fixed, th, CRITICAL_SEARCH_KMH / 3.6,
+                                                  model_error.series_stiffness_N_per_m)
+        speeds[key] = v * 3.6 if v > 0 else np.nan
+    return {"friction": model_error.wheel_rail.friction,
+            "conicity_scale_m": model_error.wheel_rail.conicity_scale_m,
+            "conicity": float(truth[j_lambda]), "conicity_filters": float(theta[j_lambda]),
+            "series_stiffness_N_per_m": model_error.series_stiffness_N_per_m,
+            "maxwell_time_s": float(truth[j_csaly] / model_error.series_stiffness_N_per_m),
+            **speeds}
+
+
 __all__ = ["CONTACT_FILE", "FAULTS_FILE", "MODEL_ERROR_FILE", "ModelError", "SETTINGS",
            "bayes_factors", "catalogue", "critical_speeds", "factor_at", "fault_times_s",
-           "model_error", "schedule"]
+           "model_error", "model_error_summary", "schedule"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
@@ -27,6 +28,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
+    STORED_RUNGS,
     Settings,
 )
 from railpaper.experiments.suspension_fault_detection.tables import (
@@ -39,7 +41,8 @@ from railpaper.monitoring import fit_exponential_tail
 #: Short labels of the ladder's rungs under the ladder figure's axes: what each rung takes
 #: away, cumulatively.
 RUNG_TICKS = {"ideal": "ideal", "no_axlebox_gyro_001": "− axle-box acc.",
-              "accelerometers_only": "− gyro", "track_unknown": "− track input"}
+              "accelerometers_only": "− gyro", "track_unknown": "− track input",
+              "model_error": "+ model error"}
 
 #: Colour and marker of each detector.
 DETECTOR_STYLES = {"cusum": ("C0", "o"), "chi2": ("C1", "v"), "glr": ("C4", "^"),
@@ -288,11 +291,27 @@ def ladder_figure(result, settings: Settings):
     detector's Kaplan–Meier median delay (top, log; missing where fewer than half the records
     are detected) and its share detected within 2 s (bottom; dotted: at the ideal rung's
     thresholds) on each rung (x)."""
-    table = result.ladder
-    faults = list(result.faults)
+    return rung_figure(result.ladder, list(result.faults), ["ideal"] + list(LADDER), settings,
+                       f"{settings.ladder_speed_kmh:g} km/h, thresholds for {LADDER_MTBFA_H:g} h "
+                       "between false alarms on each rung")
+
+
+def stored_ladder_figure(table: pd.DataFrame, faults, settings: Settings):
+    """:func:`ladder_figure` of the stored rungs beside the ideal rung of the run's records at
+    the ladder's speed (the table of
+    :func:`~railpaper.experiments.suspension_fault_detection.experiment.stored_ladder`)."""
+    n = int(table["records"].max()) if len(table) else 0
+    return rung_figure(table, list(faults), ["ideal"] + list(STORED_RUNGS), settings,
+                       f"{settings.ladder_speed_kmh:g} km/h, {n} records per fault, thresholds "
+                       f"for {LADDER_MTBFA_H:g} h between false alarms on each rung (stored "
+                       "evidence)")
+
+
+def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: Settings,
+                title: str):
+    """The picture of :func:`ladder_figure` for ``rungs`` from a ladder table's rows."""
     fig, axes = plt.subplots(2, len(faults), figsize=(7, 4.6), sharex=True, sharey="row",
                              squeeze=False)
-    rungs = ["ideal"] + list(LADDER)
     x = np.arange(len(rungs))
     drawn = set()
     for j, f in enumerate(faults):
@@ -314,7 +333,7 @@ def ladder_figure(result, settings: Settings):
             drawn.add(det)
         top.set_title(fault_short_label(f, tex=True), fontsize=8)
         top.set_yscale("log")
-        top.set_ylim(0.5 * result.dt_s, settings.duration_s)
+        top.set_ylim(0.5 * settings.dt_s, settings.duration_s)
         bottom.set_ylim(-5, 105)
         bottom.set_xticks(x)
         bottom.set_xticklabels([RUNG_TICKS.get(r, r) for r in rungs], fontsize=6, rotation=45,
@@ -328,8 +347,7 @@ def ladder_figure(result, settings: Settings):
     labels = [DETECTOR_SHORT[d] for d in DETECTORS if d in drawn]
     handles.append(Line2D([], [], color="k", lw=1.0, ls=":"))
     labels.append("at the ideal rung's thresholds")
-    fig.suptitle(f"{settings.ladder_speed_kmh:g} km/h, thresholds for {LADDER_MTBFA_H:g} h "
-                 "between false alarms on each rung", fontsize=9)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     _legend_below(fig, handles, labels, ncol=3)
     return fig
@@ -545,5 +563,5 @@ def fault_time_posterior(result, settings: Settings):
 
 
 __all__ = ["DETECTOR_STYLES", "delay_by_fault", "delay_vs_mtbfa", "fault_time_posterior",
-           "ladder_figure", "record_around_fault",
+           "ladder_figure", "record_around_fault", "rung_figure", "stored_ladder_figure",
            "roc_curves"]

@@ -32,6 +32,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     OPERATING_POINT_H,
     PAIRS,
     RUNNING_CHECK_H,
+    STORED_RUNGS,
     WITHIN_S,
     Settings,
 )
@@ -398,7 +399,8 @@ def tail_check_failures(metrics: dict, speeds_kmh, level: float = 0.05) -> str:
 RUNG_SHORT = {"ideal": "ideal (five channels)",
               "no_axlebox_gyro_001": "no axle-box accelerometers, gyro 0.01 rad/s",
               "accelerometers_only": "bogie and car-body accelerometers only",
-              "track_unknown": "accelerometers only, the track input unknown"}
+              "track_unknown": "accelerometers only, the track input unknown",
+              "model_error": "… and the truth with model error"}
 
 
 def ladder_table(result, settings: Settings) -> str:
@@ -407,23 +409,84 @@ def ladder_table(result, settings: Settings) -> str:
     per rung: the Kaplan–Meier median delay with its 95 % interval (s; "not reached" where fewer
     than half the records are detected), the share detected within 2 s, and in brackets the
     share within 2 s at the ideal rung's thresholds; "—" where the ladder did not run."""
-    m = result.metrics
+    return rung_table(result.metrics, result.faults, settings, ["ideal"] + list(LADDER),
+                      "ladder_")
+
+
+def stored_ladder_table(metrics: dict, faults, settings: Settings) -> str:
+    """:func:`ladder_table` of the stored rungs beside the ideal rung of the run's records at
+    the ladder's speed (metrics ``stored_ladder_…`` of
+    :func:`~railpaper.experiments.suspension_fault_detection.experiment.stored_ladder`)."""
+    return rung_table(metrics, faults, settings, ["ideal"] + list(STORED_RUNGS),
+                      "stored_ladder_")
+
+
+def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, summary: dict,
+                        provenance: dict, settings: Settings) -> dict[str, str]:
+    """What the page says of the stored rungs, as text, keyed by its glue names: the truth's
+    model error (``me_…`` of ``summary``,
+    :func:`~railpaper.experiments.suspension_fault_detection.faults.model_error_summary`), the
+    stored records per fault and fault-free (``stored_records``, ``stored_free``), their cost
+    (``stored_cpu_min``), the fault-free flange contacts and the fault records ended before
+    their fault per rung (``stored_free_flange``, ``stored_before_fault``), and each rung's
+    tail checks that fail at p < 0.05 (``stored_tail_checks``); "—" where nothing is stored."""
+    def kmh(v):
+        return "above the search's end" if not math.isfinite(v) else f"{v:.0f}"
+    out = {"me_friction": f"{summary['friction']:g}",
+           "me_yc_mm": f"{1e3 * summary['conicity_scale_m']:g}",
+           "me_conicity": f"{summary['conicity']:.2g}",
+           "me_conicity_filters": f"{summary['conicity_filters']:.2g}",
+           "me_ks_mn": f"{summary['series_stiffness_N_per_m'] / 1e6:g}",
+           "me_tau_ms": f"{1e3 * summary['maxwell_time_s']:.3g}",
+           "me_critical": kmh(summary["critical_speed_kmh"]),
+           "me_critical_half": kmh(summary["critical_speed_csaly_half_kmh"]),
+           "stored_cpu_min": f"{provenance.get('cpu_s', 0.0) / 60:.2g}"}
+    if table is None or not len(table):
+        return dict(out, stored_records=NONE, stored_free=NONE, stored_free_flange=NONE,
+                    stored_before_fault=NONE, stored_tail_checks=NONE)
+    rungs = list(STORED_RUNGS)
+    stored = table[table["rung"].isin(rungs)]
+    out["stored_records"] = f"{int(stored['records'].max())}"
+    out["stored_free"] = f"{metrics[f'stored_ladder_{rungs[0]}_fault_free_records']}"
+    out["stored_free_flange"] = ", ".join(
+        f"{metrics[f'stored_ladder_{r}_fault_free_flange_contacts']} of "
+        f"{metrics[f'stored_ladder_{r}_fault_free_records']} records on the {RUNG_WORDS[r]}"
+        for r in ["ideal"] + rungs if f"stored_ladder_{r}_fault_free_records" in metrics)
+    ended = table.drop_duplicates(["rung", "fault"]).groupby("rung", sort=False)
+    out["stored_before_fault"] = ", ".join(
+        f"{int(g['ended_before_fault'].sum())} of {int(g['records'].sum())} on the "
+        f"{RUNG_WORDS[r]}" for r, g in ended)
     sk = speed_key(settings.ladder_speed_kmh)
-    rungs = ["ideal"] + list(LADDER)
+    failed = [f"{DETECTOR_SHORT[d]} on the {RUNG_WORDS[r]}" for r in ["ideal"] + rungs
+              for d in DETECTORS
+              if metrics.get(f"stored_ladder_{r}_tail_check_p_{d}_{sk}", 1.0) < 0.05]
+    out["stored_tail_checks"] = ("the check fails (p < 0.05) for " + ", ".join(failed)
+                                 if failed else "none fails at p < 0.05")
+    return out
+
+
+#: The rungs in words, for sentences.
+RUNG_WORDS = {"ideal": "ideal rung", "track_unknown": "track-unknown rung",
+              "model_error": "model-error rung"}
+
+
+def rung_table(m: dict, faults, settings: Settings, rungs: list[str], prefix: str) -> str:
+    """The table of :func:`ladder_table` for ``rungs`` from metrics ``<prefix><rung>_…``."""
+    sk = speed_key(settings.ladder_speed_kmh)
     rows = []
-    for f in result.faults:
+    for f in faults:
         for i, det in enumerate(DETECTORS):
             row = [f.label if i == 0 else "", DETECTOR_SHORT[det]]
             tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
             for rung in rungs:
-                key = f"ladder_{rung}_km_delay_median_s_{tag}"
-                if f"ladder_{rung}_km_delay_median_reached_{tag}" not in m:
+                key = f"{prefix}{rung}_km_delay_median_s_{tag}"
+                if f"{prefix}{rung}_km_delay_median_reached_{tag}" not in m:
                     row.append(NONE)
                     continue
                 text = interval_text(m, key) if key in m else "not reached"
-                within = m.get(f"ladder_{rung}_detected_within_2s_{tag}")
+                within = m.get(f"{prefix}{rung}_detected_within_2s_{tag}")
                 text += "" if within is None else f"; {percent(within)}"
-                ideal = m.get(f"ladder_{rung}_ideal_thresholds_detected_within_2s_{tag}")
+                ideal = m.get(f"{prefix}{rung}_ideal_thresholds_detected_within_2s_{tag}")
                 row.append(text + ("" if ideal is None else f" ({percent(ideal)})"))
             rows.append(row)
     return markdown(pd.DataFrame(rows, columns=["fault", "detector"] + [
@@ -499,6 +562,7 @@ def fault_free_flange_text(metrics: dict, speeds_kmh) -> str:
 
 
 __all__ = ["DETECTOR_SHORT", "PARAMETERS", "RUNG_SHORT", "STATISTICS", "clean", "delay_cell",
+           "RUNG_WORDS", "rung_table", "stored_ladder_facts", "stored_ladder_table",
            "delay_text", "detection_table", "estimate_table", "false_alarm_table",
            "fault_free_flange_text", "fault_short_label", "faults_table", "interval_text",
            "ladder_table", "long_running_facts", "long_running_outcomes",
