@@ -562,6 +562,11 @@ def stored_ladder_rows(settings: Settings, records_) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _text(value) -> str:
+    """A stored text cell: an empty one reads back from CSV as NaN."""
+    return value if isinstance(value, str) else ""
+
+
 def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> list[RecordRun]:
     """The records of one stored rung (:func:`stored_ladder_rows`) as :class:`RecordRun`
     whose statistics keep only their peaks (:func:`.evidence.statistic_from_peaks`: every
@@ -576,7 +581,7 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
             speed_kmh=settings.ladder_speed_kmh, seed=int(row["record_seed"]),
             fault_time_s=float(row["fault_time_s"]), end_s=float(row["end_s"]),
             flange_contact=bool(row["flange_contact"]),
-            statistics={d: statistic_from_peaks(str(row[f"{d}_peaks"]), length)
+            statistics={d: statistic_from_peaks(_text(row[f"{d}_peaks"]), length)
                         for d in DETECTORS},
             post_fault_estimate={}, true_factor_end=np.nan,
             bank_hypothesis=np.full(length, -1)))
@@ -586,7 +591,8 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
 def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[RecordRun]
                   ) -> tuple[dict, pd.DataFrame]:
     """The stored rungs' evidence beside the ideal rung of the run's own records at
-    ``ladder_speed_kmh`` (all of them: the same seeds as the stored rungs'), each as the run's
+    ``ladder_speed_kmh`` (all of them; of the stored records, those of the same faults, roles
+    and seeds: the rungs are paired record by record), each as the run's
     ladder computes its rungs (:func:`rung_evidence`: thresholds for :data:`LADDER_MTBFA_H`
     hours recalibrated on the rung's fault-free records, and the ideal rung's applied):
     metrics ``stored_ladder_<rung>_<metric>`` (:data:`LADDER_KEPT` and at the ideal
@@ -597,7 +603,9 @@ def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[Reco
     bank = detectors.bank_hypotheses(vehicle()[1], faults.bayes_factors())
     chosen = chosen_faults(settings)
     rungs = {"ideal": [r for r in run_records if r.speed_kmh == speed]}
-    rungs.update({rung: stored_ladder_records(rows, settings, rung) for rung in STORED_RUNGS})
+    paired = {(r.fault, r.role, r.seed) for r in rungs["ideal"]}      # the run's own records
+    rungs.update({rung: [r for r in stored_ladder_records(rows, settings, rung)
+                         if (r.fault, r.role, r.seed) in paired] for rung in STORED_RUNGS})
     out, table, ideal = {}, [], {}
     for rung, records_ in rungs.items():
         if not records_:

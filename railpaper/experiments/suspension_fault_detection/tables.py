@@ -421,15 +421,20 @@ def stored_ladder_table(metrics: dict, faults, settings: Settings) -> str:
                       "stored_ladder_")
 
 
-def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, summary: dict,
+def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, faults, summary: dict,
                         provenance: dict, settings: Settings) -> dict[str, str]:
     """What the page says of the stored rungs, as text, keyed by its glue names: the truth's
     model error (``me_…`` of ``summary``,
     :func:`~railpaper.experiments.suspension_fault_detection.faults.model_error_summary`), the
     stored records per fault and fault-free (``stored_records``, ``stored_free``), their cost
     (``stored_cpu_min``), the fault-free flange contacts and the fault records ended before
-    their fault per rung (``stored_free_flange``, ``stored_before_fault``), and each rung's
-    tail checks that fail at p < 0.05 (``stored_tail_checks``); "—" where nothing is stored."""
+    their fault per rung (``stored_free_flange``, ``stored_before_fault``), the false alarms
+    per hour at the ideal rung's thresholds with their 95 % intervals
+    (``stored_ideal_false_alarms``), each detector's threshold for :data:`LADDER_MTBFA_H` hours
+    rung by rung (``stored_thresholds``), the faults that a detector not knowing the fault
+    finds within 2 s on at least half the records, per stored rung (``stored_found``), and
+    each rung's tail checks that fail at p < 0.05
+    (``stored_tail_checks``); "—" where nothing is stored."""
     def kmh(v):
         return "above the search's end" if not math.isfinite(v) else f"{v:.0f}"
     out = {"me_friction": f"{summary['friction']:g}",
@@ -443,8 +448,11 @@ def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, summary: dict
            "stored_cpu_min": f"{provenance.get('cpu_s', 0.0) / 60:.2g}"}
     if table is None or not len(table):
         return dict(out, stored_records=NONE, stored_free=NONE, stored_free_flange=NONE,
-                    stored_before_fault=NONE, stored_tail_checks=NONE)
+                    stored_before_fault=NONE, stored_tail_checks=NONE,
+                    stored_ideal_false_alarms=NONE, stored_thresholds=NONE,
+                    stored_found=NONE)
     rungs = list(STORED_RUNGS)
+    sk = speed_key(settings.ladder_speed_kmh)
     stored = table[table["rung"].isin(rungs)]
     out["stored_records"] = f"{int(stored['records'].max())}"
     out["stored_free"] = f"{metrics[f'stored_ladder_{rungs[0]}_fault_free_records']}"
@@ -456,13 +464,40 @@ def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, summary: dict
     out["stored_before_fault"] = ", ".join(
         f"{int(g['ended_before_fault'].sum())} of {int(g['records'].sum())} on the "
         f"{RUNG_WORDS[r]}" for r, g in ended)
-    sk = speed_key(settings.ladder_speed_kmh)
     failed = [f"{DETECTOR_SHORT[d]} on the {RUNG_WORDS[r]}" for r in ["ideal"] + rungs
               for d in DETECTORS
               if metrics.get(f"stored_ladder_{r}_tail_check_p_{d}_{sk}", 1.0) < 0.05]
+    out["stored_ideal_false_alarms"] = "; ".join(
+        f"on the {RUNG_WORDS[r]} " + ", ".join(
+            f"{DETECTOR_SHORT[d]} {number(metrics[key], 3)} "
+            f"[{number(metrics[key + '_low'], 3)}, {number(metrics[key + '_high'], 3)}]"
+            for d in DETECTORS
+            if (key := f"stored_ladder_{r}_ideal_thresholds_false_alarms_per_hour_{d}_{sk}")
+            in metrics)
+        for r in rungs)
+    out["stored_thresholds"] = "; ".join(
+        f"{DETECTOR_SHORT[d]} " + " → ".join(
+            number(metrics[k], 3) if (k := f"stored_ladder_{r}_threshold_at_"
+                                            f"{LADDER_MTBFA_H:g}h_{d}_{sk}") in metrics else NONE
+            for r in ["ideal"] + rungs) for d in DETECTORS)
+    out["stored_found"] = "; ".join(
+        f"on the {RUNG_WORDS[r]}, " + _found_within_2s(table[table["rung"] == r], faults)
+        for r in rungs)
     out["stored_tail_checks"] = ("the check fails (p < 0.05) for " + ", ".join(failed)
                                  if failed else "none fails at p < 0.05")
     return out
+
+
+def _found_within_2s(rows: pd.DataFrame, faults) -> str:
+    """"lost damper (GLR, Shiryaev–Roberts), …": the faults that some detector not knowing the
+    fault detects within 2 s on at least half of their records, with those detectors; "none"."""
+    found, label = [], {f.name: fault_short_label(f) for f in faults}
+    for fault, group in rows.groupby("fault", sort=False):
+        who = [DETECTOR_SHORT[d] for d in DETECTORS if d != "oracle"
+               and (group.loc[group["detector"] == d, "detected_within_2s"] >= 0.5).any()]
+        if who:
+            found.append(f"{label.get(fault, fault)} ({', '.join(who)})")
+    return ", ".join(found) if found else "none"
 
 
 #: The rungs in words, for sentences.

@@ -73,7 +73,7 @@ def test_rows_read_back_as_records():
     peaks = {f"{d}_peaks": "200:1.5 300:2.5" for d in DETECTORS}
     rows = pd.DataFrame([
         dict(seed=0, rung="model_error", record="ksy_70", record_seed=0, fault_time_s=1.5,
-             end_s=2.0, flange_contact=True, **peaks),
+             end_s=2.0, flange_contact=True, **dict(peaks, glr_peaks=np.nan)),
         dict(seed=5, rung="model_error", record="calibration", record_seed=300,
              fault_time_s=-1.0, end_s=4.0, flange_contact=False, **peaks),
         dict(seed=7, rung="track_unknown", record="ksy_70", record_seed=0, fault_time_s=1.5,
@@ -81,6 +81,7 @@ def test_rows_read_back_as_records():
     fault, free = stored_ladder_records(rows, settings, "model_error")
     assert (fault.fault, fault.role, fault.seed, fault.end_s) == ("ksy_70", "fault", 0, 2.0)
     assert fault.flange_contact and fault.statistics["glr"].size == 400
+    assert np.all(fault.statistics["glr"] == -np.inf)         # an empty cell reads back as NaN
     assert fault.statistics["bayes"][300] == 2.5 and fault.statistics["bayes"][299] == -np.inf
     assert (free.fault, free.role, free.seed) == (NO_FAULT, "calibration", 300)
     assert free.statistics["oracle"].size == 800
