@@ -33,6 +33,9 @@ from railpaper.models.lateral_truth import TruthPlant, WheelRail, rk4_step
 DAMPER_FORCE_STATE = lateral_16state.N_STATES
 #: States of the plant: the linear model's 16 and the damper force.
 N_STATES = lateral_16state.N_STATES + 1
+#: |λ| h below which the damper force's own relaxation (λ = −K_s / C_saly) keeps classical RK4
+#: stable (its real-axis bound is 2.785).
+RK4_STABLE_STEP = 2.5
 _CSALY = lateral_16state.PARAM_NAMES.index("csaly")
 _YAW_RATE = lateral_16state.YAW_RATE_STATE
 
@@ -128,12 +131,17 @@ def simulate_schedule(fixed: dict, thetas, starts, speed_mps: float, dt_fine_s: 
     ends = list(starts[1:]) + [len(u_fine)]
     for theta, start, end in zip(thetas, starts, ends):
         plant = ModelErrorPlant(fixed, theta, speed_mps, wheel_rail, series_stiffness_N_per_m)
-        if plant.damping_N_s_per_m == 0:
+        damping = plant.damping_N_s_per_m
+        if 0 < damping < series_stiffness_N_per_m * h / RK4_STABLE_STEP:
+            raise ValueError(f"C_saly = {damping:g} N s/m is too small for RK4 at h = {h:g} s "
+                             f"(K_s h / C > {RK4_STABLE_STEP}); treat the damper as lost (0) "
+                             "or take a shorter step")
+        if damping == 0:
             x[start, DAMPER_FORCE_STATE] = 0.0
         for k in range(start, min(end, len(u_fine))):
             x[k + 1] = rk4_step(plant.derivative, x[k], u_fine[k], h)
     return x
 
 
-__all__ = ["DAMPER_FORCE_STATE", "N_STATES", "ModelErrorPlant", "critical_speed", "linear_matrix",
-           "simulate_schedule"]
+__all__ = ["DAMPER_FORCE_STATE", "N_STATES", "RK4_STABLE_STEP", "ModelErrorPlant",
+           "critical_speed", "linear_matrix", "simulate_schedule"]

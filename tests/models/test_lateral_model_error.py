@@ -118,3 +118,23 @@ def test_the_critical_speeds_the_data_file_states():
 def test_bad_series_stiffness_is_refused():
     with pytest.raises(ValueError, match="series stiffness"):
         lateral_model_error.ModelErrorPlant(FIXED, THETA, V, WheelRail.linear(), 0.0)
+
+
+def test_a_damping_too_small_for_the_step_is_refused():
+    weak = THETA.copy()
+    weak[CSALY] = K_S * 5e-4 / 3.0                     # K_s h / C = 3 > RK4_STABLE_STEP
+    with pytest.raises(ValueError, match="too small for RK4"):
+        lateral_model_error.simulate_schedule(FIXED, [weak], [0], V, 5e-4, np.zeros((3, 2)),
+                                              WheelRail.linear(), K_S)
+
+
+def test_the_summary_of_the_model_error_on_the_page():
+    summary = faults.model_error_summary(FIXED, THETA, faults.model_error())
+    # the interpolated crossings lie within the 2 km/h grid step below the grid's first
+    # unstable speed (376 and 288 km/h)
+    assert 374.0 < summary["critical_speed_kmh"] <= 376.0
+    assert 286.0 < summary["critical_speed_csaly_half_kmh"] <= 288.0
+    assert summary["critical_speed_kmh_stiffness_x1"] == summary["critical_speed_kmh"]
+    assert summary["critical_speed_kmh_stiffness_x0.5"] < summary["critical_speed_kmh"] \
+        < summary["critical_speed_kmh_stiffness_x2"]
+    assert summary["maxwell_time_s"] == pytest.approx(THETA[CSALY] / 2.0e7)

@@ -631,8 +631,13 @@ def statistic_peaks(statistic: np.ndarray, first_row: int, block_rows: int) -> s
     from ``first_row`` on, each sample that exceeds all before it in the window (so the first
     sample at or above any threshold is kept, hence every alarm time) and each complete
     block's largest sample (so every block maximum).  Text ``"row:value row:value …"`` with
-    the values' shortest exact repr; :func:`statistic_from_peaks` reads it back."""
+    the values' shortest exact repr; :func:`statistic_from_peaks` reads it back.  Not kept:
+    the rest of the path, so a metric that reads it (the maximum in the second after the fault
+    of the ROC points, the restarted CUSUM's alarm count) is wrong on a statistic read back;
+    the stored ladder keeps none of them."""
     x = np.asarray(statistic, float)
+    if np.isnan(x).any():
+        raise ValueError("a statistic with NaN cannot be kept as its peaks")
     window = x[first_row:]
     before = np.concatenate([[-np.inf], np.maximum.accumulate(window)[:-1]]) if window.size \
         else window

@@ -37,6 +37,7 @@ from railpaper.experiments.suspension_fault_detection.evidence import (
     evidence,
     false_alarm_metrics,
     fault_metrics,
+    flange_metrics,
     statistic_from_peaks,
     statistic_peaks,
     window_rows,
@@ -571,7 +572,7 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
     """The records of one stored rung (:func:`stored_ladder_rows`) as :class:`RecordRun`
     whose statistics keep only their peaks (:func:`.evidence.statistic_from_peaks`: every
     threshold, block maximum and alarm time the rung's evidence reads is the original's; no
-    estimates, no GLR hypotheses)."""
+    estimates, no GLR hypotheses, so no blame metrics)."""
     out = []
     for row in rows[rows["rung"] == rung].to_dict("records"):
         length = int(round(row["end_s"] / settings.dt_s))
@@ -583,36 +584,54 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
             flange_contact=bool(row["flange_contact"]),
             statistics={d: statistic_from_peaks(_text(row[f"{d}_peaks"]), length)
                         for d in DETECTORS},
-            post_fault_estimate={}, true_factor_end=np.nan,
-            bank_hypothesis=np.full(length, -1)))
+            post_fault_estimate={}, true_factor_end=np.nan, bank_hypothesis=None))
     return out
 
 
 def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[RecordRun]
                   ) -> tuple[dict, pd.DataFrame]:
     """The stored rungs' evidence beside the ideal rung of the run's own records at
-    ``ladder_speed_kmh`` (all of them; of the stored records, those of the same faults, roles
-    and seeds: the rungs are paired record by record), each as the run's
+    ``ladder_speed_kmh``, on the records (fault, role, seed) that the run and every stored rung
+    hold (the rungs are paired record by record), each as the run's
     ladder computes its rungs (:func:`rung_evidence`: thresholds for :data:`LADDER_MTBFA_H`
     hours recalibrated on the rung's fault-free records, and the ideal rung's applied):
     metrics ``stored_ladder_<rung>_<metric>`` (:data:`LADDER_KEPT` and at the ideal
-    thresholds) and the ladder table's rows, with the records per fault (``records``) and the
-    fault records that ended before their fault (``ended_before_fault``)."""
+    thresholds), each rung's flange contacts after the faults, on the records that reached
+    their fault (``…_flange_contact_rate_…``, ``…_flange_contact_after_…``), its tail
+    check (``…_tail_check_…``) and its stored records before pairing
+    (``stored_ladder_<rung>_stored_records``), and the ladder table's rows, with the records
+    per fault (``records``) and the fault records that ended before their fault
+    (``ended_before_fault``)."""
     speed = settings.ladder_speed_kmh
     sk = speed_key(speed)
     bank = detectors.bank_hypotheses(vehicle()[1], faults.bayes_factors())
     chosen = chosen_faults(settings)
-    rungs = {"ideal": [r for r in run_records if r.speed_kmh == speed]}
-    paired = {(r.fault, r.role, r.seed) for r in rungs["ideal"]}      # the run's own records
-    rungs.update({rung: [r for r in stored_ladder_records(rows, settings, rung)
-                         if (r.fault, r.role, r.seed) in paired] for rung in STORED_RUNGS})
-    out, table, ideal = {}, [], {}
+    stored = {rung: stored_ladder_records(rows, settings, rung) for rung in STORED_RUNGS}
+    out = {f"stored_ladder_{rung}_stored_records": len(records_)
+           for rung, records_ in stored.items()}
+
+    def key(r):
+        return r.fault, r.role, r.seed
+    ours = [r for r in run_records if r.speed_kmh == speed]
+    paired = {key(r) for r in ours}.intersection(*({key(r) for r in records_}
+                                                   for records_ in stored.values()))
+    rungs = {"ideal": [r for r in ours if key(r) in paired]}
+    rungs.update({rung: [r for r in records_ if key(r) in paired]
+                  for rung, records_ in stored.items()})
+    table, ideal = [], {}
     for rung, records_ in rungs.items():
         if not records_:
             continue
         m, at_ideal = rung_evidence(rung, records_, settings, chosen, ideal, bank.parameter,
                                     prefix="stored_ladder_")
         out.update(_kept(m, f"stored_ladder_{rung}_"))
+        out.update({f"stored_ladder_{rung}_{k}": v for k, v in m.items()
+                    if k.startswith("tail_check_")})
+        for f in chosen:                 # the records that reached their fault
+            reached = [r for r in records_ if r.fault == f.name and r.end_s > r.fault_time_s]
+            if reached:
+                out.update({f"stored_ladder_{rung}_{k}": v for k, v in flange_metrics(
+                    reached, f"{f.name}_{sk}").items()})
         out.update(at_ideal.metrics)
         if rung == "ideal":
             ideal = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}") for d in DETECTORS}

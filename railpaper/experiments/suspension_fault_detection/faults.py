@@ -163,13 +163,20 @@ def critical_speeds(fixed: dict, theta: np.ndarray, faults: list[Fault]) -> pd.D
 
 
 
+#: The series stiffness's multiples at which :func:`model_error_summary` gives the critical
+#: speed: its sensitivity to a value with no measured source.
+SERIES_STIFFNESS_RATIOS = (0.5, 1.0, 2.0)
+
+
 def model_error_summary(fixed: dict, theta: np.ndarray, model_error: ModelError) -> dict:
     """What the page says of the truth with model error, SI units: ``friction``,
     ``conicity_scale_m``, ``conicity`` (the truth's) and ``conicity_filters``,
     ``series_stiffness_N_per_m``, ``maxwell_time_s`` (C_saly / K_s at the nominal damping), and
     the linearised truth's critical speed, km/h, fault-free and with the anti-yaw damping halved
     (``critical_speed_kmh``, ``critical_speed_csaly_half_kmh``; NaN: stable to the search's
-    end)."""
+    end), and fault-free at the series stiffness times each of :data:`SERIES_STIFFNESS_RATIOS`
+    (``critical_speed_kmh_stiffness_x<ratio>``) and with a pure damper
+    (``critical_speed_kmh_pure_damper``)."""
     truth = model_error.truth_theta(theta)
     j_lambda, j_csaly = (lateral_16state.PARAM_NAMES.index(n) for n in ("lambda", "csaly"))
     half = truth.copy()
@@ -179,6 +186,12 @@ def model_error_summary(fixed: dict, theta: np.ndarray, model_error: ModelError)
         _, v = lateral_model_error.critical_speed(fixed, th, CRITICAL_SEARCH_KMH / 3.6,
                                                   model_error.series_stiffness_N_per_m)
         speeds[key] = v * 3.6 if v > 0 else np.nan
+    for ratio in SERIES_STIFFNESS_RATIOS:           # how much the stiffness's value matters
+        _, v = lateral_model_error.critical_speed(
+            fixed, truth, CRITICAL_SEARCH_KMH / 3.6, ratio * model_error.series_stiffness_N_per_m)
+        speeds[f"critical_speed_kmh_stiffness_x{ratio:g}"] = v * 3.6 if v > 0 else np.nan
+    _, v = lateral_16state.critical_speed(fixed, truth, CRITICAL_SEARCH_KMH / 3.6)
+    speeds["critical_speed_kmh_pure_damper"] = v * 3.6 if v > 0 else np.nan
     return {"friction": model_error.wheel_rail.friction,
             "conicity_scale_m": model_error.wheel_rail.conicity_scale_m,
             "conicity": float(truth[j_lambda]), "conicity_filters": float(theta[j_lambda]),
@@ -187,6 +200,6 @@ def model_error_summary(fixed: dict, theta: np.ndarray, model_error: ModelError)
             **speeds}
 
 
-__all__ = ["CONTACT_FILE", "FAULTS_FILE", "MODEL_ERROR_FILE", "ModelError", "SETTINGS",
-           "bayes_factors", "catalogue", "critical_speeds", "factor_at", "fault_times_s",
-           "model_error", "model_error_summary", "schedule"]
+__all__ = ["CONTACT_FILE", "FAULTS_FILE", "MODEL_ERROR_FILE", "ModelError",
+           "SERIES_STIFFNESS_RATIOS", "SETTINGS", "bayes_factors", "catalogue", "critical_speeds",
+           "factor_at", "fault_times_s", "model_error", "model_error_summary", "schedule"]

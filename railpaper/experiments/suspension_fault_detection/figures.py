@@ -304,12 +304,14 @@ def stored_ladder_figure(table: pd.DataFrame, faults, settings: Settings):
     return rung_figure(table, list(faults), ["ideal"] + list(STORED_RUNGS), settings,
                        f"{settings.ladder_speed_kmh:g} km/h, {n} records per fault, thresholds "
                        f"for {LADDER_MTBFA_H:g} h between false alarms on each rung (stored "
-                       "evidence)")
+                       "evidence)", ticks={"track_unknown": "acc. only, − track"})
 
 
 def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: Settings,
-                title: str):
-    """The picture of :func:`ladder_figure` for ``rungs`` from a ladder table's rows."""
+                title: str, ticks: dict | None = None):
+    """The picture of :func:`ladder_figure` for ``rungs`` from a ladder table's rows
+    (``ticks``: tick labels that replace :data:`RUNG_TICKS`')."""
+    ticks = {**RUNG_TICKS, **(ticks or {})}
     fig, axes = plt.subplots(2, len(faults), figsize=(7, 4.6), sharex=True, sharey="row",
                              squeeze=False)
     x = np.arange(len(rungs))
@@ -336,7 +338,7 @@ def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: S
         top.set_ylim(0.5 * settings.dt_s, settings.duration_s)
         bottom.set_ylim(-5, 105)
         bottom.set_xticks(x)
-        bottom.set_xticklabels([RUNG_TICKS.get(r, r) for r in rungs], fontsize=6, rotation=45,
+        bottom.set_xticklabels([ticks.get(r, r) for r in rungs], fontsize=6, rotation=45,
                                ha="right", rotation_mode="anchor")
         for ax in (top, bottom):
             ax.tick_params(labelsize=7)

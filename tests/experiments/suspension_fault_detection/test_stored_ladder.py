@@ -19,8 +19,10 @@ from railpaper.experiments.suspension_fault_detection.experiment import (
     stored_ladder_size,
     stored_sizes,
 )
+from railpaper.experiments.suspension_fault_detection.faults import catalogue
 from railpaper.experiments.suspension_fault_detection.result import NO_FAULT
 from railpaper.experiments.suspension_fault_detection.spec import DETECTORS, STORED_RUNGS
+from railpaper.experiments.suspension_fault_detection.tables import found_within_2s
 from railpaper.monitoring import block_maxima
 
 
@@ -85,3 +87,15 @@ def test_rows_read_back_as_records():
     assert fault.statistics["bayes"][300] == 2.5 and fault.statistics["bayes"][299] == -np.inf
     assert (free.fault, free.role, free.seed) == (NO_FAULT, "calibration", 300)
     assert free.statistics["oracle"].size == 800
+
+
+def test_faults_found_within_2s_by_hand():
+    chosen = [catalogue()[0][n] for n in ("csaly_0", "ksy_70")]
+    rows = pd.DataFrame([
+        # the lost damper: GLR on half the records (counts), the oracle on all (never counts)
+        dict(fault="csaly_0", detector="glr", detected_within_2s=0.5),
+        dict(fault="csaly_0", detector="cusum", detected_within_2s=0.45),
+        dict(fault="csaly_0", detector="oracle", detected_within_2s=1.0),
+        dict(fault="ksy_70", detector="oracle", detected_within_2s=1.0)])
+    assert found_within_2s(rows, chosen) == "C_saly 0 % (GLR)"
+    assert found_within_2s(rows[rows.fault == "ksy_70"], chosen) == "none"
