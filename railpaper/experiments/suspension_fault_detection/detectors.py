@@ -18,7 +18,12 @@
 * :func:`oracle_change_posterior` (``oracle``) — the log posterior odds that a fault has
   happened, for hypotheses that are the catalogue's true post-fault values and change times on
   the grid the truth is drawn from (:mod:`railpaper.engine.changepoint`): it knows the answer
-  up to which fault and when, so its gap to ``bayes`` is the value of knowing the fault.
+  up to which fault and when, so its gap to ``bayes`` is the value of knowing the fault;
+* :func:`hunting_rms` (``hunting``) — no model at all: the bogie frame's lateral acceleration
+  band-passed around the frequency at which a failed damper lets the bogie hunt, as a sliding
+  RMS over 100 m (the quantity of EN 14363's instability criterion).  It sees hunting, not a
+  residual, so a model error cannot raise its threshold; the appendix runs it on the stored
+  ladder rungs (:data:`~.spec.STORED_DETECTORS`).
 
 All of them filter with the record's own process noise (the track input's changes, chapter 003)
 from the state at rest (:func:`initial_state`; filters that estimate the track start it at its
@@ -30,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import butter, sosfilt
 
 from railpaper.engine import (LinearGaussianBatch, WindowedChangeStatistics, change_likelihoods,
                               change_posterior, cusum_variance, whitened_innovations,
@@ -193,6 +199,44 @@ def change_bank(system, theta: np.ndarray, record: LateralRecord, hypotheses: Ba
                                       first_change_step=first_change_step)
 
 
-__all__ = ["BankHypotheses", "OraclePosterior", "bank_hypotheses", "change_bank",
-           "initial_state", "nominal_innovations", "oracle_change_posterior",
+#: Half-width of the hunting detector's band around its frequency, Hz (EN 14363: f0 ± 2 Hz).
+HUNTING_HALF_BAND_HZ = 2.0
+#: Length of track over which the hunting detector's RMS runs, m (EN 14363: 100 m).
+HUNTING_TRACK_M = 100.0
+#: Oscillatory modes below this frequency are car-body modes, not hunting, Hz.
+HUNTING_MIN_HZ = 2.0
+
+
+def hunting_frequency_hz(fixed: dict, theta: np.ndarray, speed_mps: float) -> float:
+    """The band centre of :func:`hunting_rms`, Hz: the frequency of the least-damped mode above
+    :data:`HUNTING_MIN_HZ` of the model with its anti-yaw damping lost, at the speed — the
+    hunting a failed damper lets grow (6.4 Hz at 300 km/h).  A monitor's designer knows it
+    from the vehicle's stability analysis; it is the only use of the model in this detector."""
+    lost = np.array(theta, float)
+    lost[lateral_16state.PARAM_NAMES.index("csaly")] = 0.0
+    ev = np.linalg.eigvals(lateral_16state.build_A_direct(fixed, lost, speed_mps))
+    frequency = np.abs(ev.imag) / (2 * np.pi)
+    oscillating = frequency > HUNTING_MIN_HZ
+    return float(frequency[oscillating][np.argmax(ev.real[oscillating])])
+
+
+def hunting_rms(record: LateralRecord, dt_s: float, speed_mps: float,
+                frequency_hz: float) -> np.ndarray:
+    """The hunting detector's statistic (K,), m/s²: the bogie's lateral acceleration channel
+    band-passed at ``frequency_hz`` ± :data:`HUNTING_HALF_BAND_HZ` (4th-order Butterworth,
+    causal from rest), then its RMS over the last :data:`HUNTING_TRACK_M` of track
+    (``round(100 m / (v dt))`` samples; fewer at the start)."""
+    y = record.y[:, lateral_16state.CHANNELS.index("acc_b_mps2")]
+    band = (frequency_hz - HUNTING_HALF_BAND_HZ, frequency_hz + HUNTING_HALF_BAND_HZ)
+    filtered = sosfilt(butter(2, band, btype="bandpass", fs=1.0 / dt_s, output="sos"), y)
+    window = max(1, int(round(HUNTING_TRACK_M / (speed_mps * dt_s))))
+    energy = np.concatenate([[0.0], np.cumsum(filtered ** 2)])
+    k = np.arange(1, len(filtered) + 1)
+    first = np.maximum(0, k - window)
+    return np.sqrt(np.maximum(energy[k] - energy[first], 0.0) / (k - first))
+
+
+__all__ = ["HUNTING_HALF_BAND_HZ", "HUNTING_MIN_HZ", "HUNTING_TRACK_M", "BankHypotheses",
+           "OraclePosterior", "bank_hypotheses", "change_bank", "hunting_frequency_hz",
+           "hunting_rms", "initial_state", "nominal_innovations", "oracle_change_posterior",
            "oracle_hypotheses", "residual_cusum", "windowed_chi2"]

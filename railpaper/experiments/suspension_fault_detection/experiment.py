@@ -55,6 +55,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     RUNGS_WITHOUT_TRACK,
+    STORED_DETECTORS,
     STORED_RUNGS,
     TRACK_UNKNOWN_FAULT_SHARE,
     Settings,
@@ -208,7 +209,10 @@ def run_record(settings: Settings, fault_settings: dict, fixed: dict, theta: np.
                   "chi2": detectors.windowed_chi2(innovations, settings.chi2_window_samples),
                   "glr": changes.glr,
                   "bayes": changes.log_shiryaev_roberts,
-                  "oracle": oracle.log_odds}
+                  "oracle": oracle.log_odds,
+                  "hunting": detectors.hunting_rms(
+                      rec.record, settings.dt_s, speed_kmh / 3.6,
+                      detectors.hunting_frequency_hz(fixed, theta, speed_kmh / 3.6))}
     j = None if fault is None else lateral_16state.PARAM_NAMES.index(fault.parameter)
     estimate = {}
     if j is not None:
@@ -280,23 +284,24 @@ class RungAtIdealThresholds:
 
 def rung_evidence(rung: str, records_: list[RecordRun], settings: Settings,
                   chosen: list[Fault], ideal_thresholds: dict, bank_parameter: np.ndarray,
-                  prefix: str = "ladder_") -> tuple[dict, RungAtIdealThresholds]:
+                  prefix: str = "ladder_", detectors_: dict = DETECTORS
+                  ) -> tuple[dict, RungAtIdealThresholds]:
     """One ladder rung's evidence (:func:`.evidence.evidence` on its records at
     ``ladder_speed_kmh``, thresholds recalibrated on its own fault-free records) and, given
     the ideal rung's thresholds for :data:`LADDER_MTBFA_H` hours (``{detector: threshold}``,
     empty for the ideal rung itself), the rung's false alarms and detections at them, with one
-    ladder-table row per (detector, fault)."""
+    ladder-table row per (detector, fault); ``detectors_``: the detectors read."""
     _, fault_settings = faults.catalogue()
     speed = settings.ladder_speed_kmh
     monitor_from = float(faults.fault_times_s(fault_settings)[0])
     first_row = window_rows(settings.dt_s, monitor_from)
     sk = speed_key(speed)
     fault_parameter = {f.name: lateral_16state.PARAM_NAMES.index(f.parameter) for f in chosen}
-    m, _, _, _ = evidence(records_, list(DETECTORS), (speed,), [f.name for f in chosen],
+    m, _, _, _ = evidence(records_, list(detectors_), (speed,), [f.name for f in chosen],
                           settings, settings.dt_s, monitor_from, bank_parameter, fault_parameter)
     metrics, rows = {}, []
     free = [r for r in records_ if r.role == "evaluation"]
-    for det in DETECTORS:
+    for det in detectors_:
         h_ideal = ideal_thresholds.get(det)
         if h_ideal is not None and free:
             fa = false_alarm_metrics(free, det, h_ideal, first_row, settings.dt_s, f"{det}_{sk}")
@@ -556,7 +561,7 @@ def stored_ladder_rows(settings: Settings, records_) -> pd.DataFrame:
             row = {"seed": int(record), "rung": rung, "record": key,
                    "record_seed": record_seed, "fault_time_s": run_.fault_time_s,
                    "end_s": run_.end_s, "flange_contact": bool(run_.flange_contact)}
-            for detector in DETECTORS:
+            for detector in STORED_DETECTORS:
                 row[f"{detector}_peaks"] = statistic_peaks(run_.statistics[detector],
                                                            first_row, block_rows)
             rows.append(row)
@@ -583,7 +588,7 @@ def stored_ladder_records(rows: pd.DataFrame, settings: Settings, rung: str) -> 
             fault_time_s=float(row["fault_time_s"]), end_s=float(row["end_s"]),
             flange_contact=bool(row["flange_contact"]),
             statistics={d: statistic_from_peaks(_text(row[f"{d}_peaks"]), length)
-                        for d in DETECTORS},
+                        for d in STORED_DETECTORS if f"{d}_peaks" in row},
             post_fault_estimate={}, true_factor_end=np.nan, bank_hypothesis=None))
     return out
 
@@ -623,7 +628,7 @@ def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[Reco
         if not records_:
             continue
         m, at_ideal = rung_evidence(rung, records_, settings, chosen, ideal, bank.parameter,
-                                    prefix="stored_ladder_")
+                                    prefix="stored_ladder_", detectors_=STORED_DETECTORS)
         out.update(_kept(m, f"stored_ladder_{rung}_"))
         out.update({f"stored_ladder_{rung}_{k}": v for k, v in m.items()
                     if k.startswith("tail_check_")})
@@ -634,7 +639,8 @@ def stored_ladder(rows: pd.DataFrame, settings: Settings, run_records: list[Reco
                     reached, f"{f.name}_{sk}").items()})
         out.update(at_ideal.metrics)
         if rung == "ideal":
-            ideal = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}") for d in DETECTORS}
+            ideal = {d: m.get(f"threshold_at_{LADDER_MTBFA_H:g}h_{d}_{sk}")
+                     for d in STORED_DETECTORS}
         free = [r for r in records_ if r.fault == NO_FAULT]
         out[f"stored_ladder_{rung}_fault_free_flange_contacts"] = sum(
             r.flange_contact for r in free)

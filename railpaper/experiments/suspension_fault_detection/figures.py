@@ -28,6 +28,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     LADDER,
     LADDER_MTBFA_H,
     MTBFA_TARGETS_H,
+    STORED_DETECTORS,
     STORED_RUNGS,
     Settings,
 )
@@ -46,7 +47,7 @@ RUNG_TICKS = {"ideal": "ideal", "no_axlebox_gyro_001": "− axle-box acc.",
 
 #: Colour and marker of each detector.
 DETECTOR_STYLES = {"cusum": ("C0", "o"), "chi2": ("C1", "v"), "glr": ("C4", "^"),
-                   "bayes": ("C2", "s"), "oracle": ("C3", "D")}
+                   "bayes": ("C2", "s"), "oracle": ("C3", "D"), "hunting": ("C7", "X")}
 #: Line styles where detectors' curves coincide (the GLR drawn dashed above Shiryaev–Roberts,
 #: whose alarms it often shares).
 LINE_STYLES = {"glr": "--"}
@@ -304,13 +305,14 @@ def stored_ladder_figure(table: pd.DataFrame, faults, settings: Settings):
     return rung_figure(table, list(faults), ["ideal"] + list(STORED_RUNGS), settings,
                        f"{settings.ladder_speed_kmh:g} km/h, {n} records per fault, thresholds "
                        f"for {LADDER_MTBFA_H:g} h between false alarms on each rung (stored "
-                       "evidence)", ticks={"track_unknown": "acc. only, − track"})
+                       "evidence)", ticks={"track_unknown": "acc. only, − track"},
+                       detectors=STORED_DETECTORS)
 
 
 def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: Settings,
-                title: str, ticks: dict | None = None):
+                title: str, ticks: dict | None = None, detectors: dict = DETECTORS):
     """The picture of :func:`ladder_figure` for ``rungs`` from a ladder table's rows
-    (``ticks``: tick labels that replace :data:`RUNG_TICKS`')."""
+    (``ticks``: tick labels that replace :data:`RUNG_TICKS`'; ``detectors``: those drawn)."""
     ticks = {**RUNG_TICKS, **(ticks or {})}
     fig, axes = plt.subplots(2, len(faults), figsize=(7, 4.6), sharex=True, sharey="row",
                              squeeze=False)
@@ -318,7 +320,7 @@ def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: S
     drawn = set()
     for j, f in enumerate(faults):
         top, bottom = axes[0, j], axes[1, j]
-        for det in DETECTORS:
+        for det in detectors:
             rows = table[(table["detector"] == det) & (table["fault"] == f.name)] \
                 if table is not None and len(table) else None
             if rows is None or not len(rows):
@@ -345,8 +347,8 @@ def rung_figure(table: pd.DataFrame, faults: list, rungs: list[str], settings: S
     axes[0, 0].set_ylabel("median delay (s)", fontsize=8)
     axes[1, 0].set_ylabel("detected within 2 s (%)", fontsize=8)
     handles = [Line2D([], [], color=DETECTOR_STYLES[d][0], marker=DETECTOR_STYLES[d][1], ms=3,
-                      lw=1.0, ls=LINE_STYLES.get(d, "-")) for d in DETECTORS if d in drawn]
-    labels = [DETECTOR_SHORT[d] for d in DETECTORS if d in drawn]
+                      lw=1.0, ls=LINE_STYLES.get(d, "-")) for d in detectors if d in drawn]
+    labels = [DETECTOR_SHORT[d] for d in detectors if d in drawn]
     handles.append(Line2D([], [], color="k", lw=1.0, ls=":"))
     labels.append("at the ideal rung's thresholds")
     fig.suptitle(title, fontsize=9)

@@ -127,6 +127,12 @@ STORED_RUNGS = {"track_unknown": (LADDER["track_unknown"][0], LADDER["track_unkn
                 "model_error": ("bogie and car-body accelerometers only, the track input "
                                 "unknown, the truth with model error",
                                 LADDER["track_unknown"][1], True)}
+#: The detectors of the stored rungs: the run's and a model-free one, which sees the bogie
+#: hunt, not a residual (:func:`~.detectors.hunting_rms`; every record carries its statistic,
+#: the run's own evidence leaves it out: bringing it in means new CI bands).
+STORED_DETECTORS = {**DETECTORS,
+                    "hunting": "bogie lateral acceleration RMS over 100 m, band-passed at the "
+                               "failed damper's hunting frequency (EN 14363's quantity)"}
 #: The operating point the page's delay tables read, h between false alarms.
 OPERATING_POINT_H = 100.0
 #: The paired comparisons at the operating point (A, B): the Bayesian detector against each
@@ -148,5 +154,5 @@ MTBFA_CURVE_H = tuple(10.0 ** np.arange(-3.0, 4.01, 0.5))
 
 __all__ = ["CRITICAL_SEARCH_TOP_KMH", "DETECTORS", "LADDER", "LADDER_MTBFA_H", "MTBFA_CURVE_H",
            "MTBFA_TARGETS_H", "OPERATING_POINT_H", "PAIRS", "RUNNING_CHECK_H",
-           "RUNNING_CHECK_LEVEL", "RUNGS_WITHOUT_TRACK", "SPEC", "STORED_RUNGS", "Settings",
+           "RUNNING_CHECK_LEVEL", "RUNGS_WITHOUT_TRACK", "SPEC", "STORED_DETECTORS", "STORED_RUNGS", "Settings",
            "TRACK_UNKNOWN_FAULT_SHARE", "WITHIN_S"]

@@ -32,6 +32,7 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     OPERATING_POINT_H,
     PAIRS,
     RUNNING_CHECK_H,
+    STORED_DETECTORS,
     STORED_RUNGS,
     WITHIN_S,
     Settings,
@@ -40,7 +41,7 @@ from railpaper.monitoring import SECONDS_PER_HOUR, poisson_two_sided_power
 
 #: Short detector names for table headers and legends (full names: ``spec.DETECTORS``).
 DETECTOR_SHORT = {"cusum": "variance CUSUM", "chi2": "windowed χ²", "glr": "GLR",
-                  "bayes": "Shiryaev–Roberts", "oracle": "oracle"}
+                  "bayes": "Shiryaev–Roberts", "oracle": "oracle", "hunting": "hunting RMS"}
 
 #: What each detector's alarm statistic is (its threshold's meaning, dimensionless).
 STATISTICS = {"cusum": "CUSUM log-likelihood ratio of the whitened innovations",
@@ -418,7 +419,7 @@ def stored_ladder_table(metrics: dict, faults, settings: Settings) -> str:
     the ladder's speed (metrics ``stored_ladder_…`` of
     :func:`~railpaper.experiments.suspension_fault_detection.experiment.stored_ladder`)."""
     return rung_table(metrics, faults, settings, ["ideal"] + list(STORED_RUNGS),
-                      "stored_ladder_")
+                      "stored_ladder_", STORED_DETECTORS)
 
 
 def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, faults, summary: dict,
@@ -505,7 +506,7 @@ def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, faults, summa
         f"on the {RUNG_WORDS[r]} " + ", ".join(
             f"{DETECTOR_SHORT[d]} {number(metrics[key], 3)} "
             f"[{number(metrics[key + '_low'], 3)}, {number(metrics[key + '_high'], 3)}]"
-            for d in DETECTORS
+            for d in STORED_DETECTORS
             if (key := f"stored_ladder_{r}_ideal_thresholds_false_alarms_per_hour_{d}_{sk}")
             in metrics)
         for r in rungs)
@@ -513,10 +514,10 @@ def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, faults, summa
         f"{DETECTOR_SHORT[d]} " + " → ".join(
             number(metrics[k], 3) if (k := f"stored_ladder_{r}_threshold_at_"
                                             f"{LADDER_MTBFA_H:g}h_{d}_{sk}") in metrics else NONE
-            for r in ["ideal"] + rungs) for d in DETECTORS)
+            for r in ["ideal"] + rungs) for d in STORED_DETECTORS)
     failed, checked_h = [], []
     for r in ["ideal"] + rungs:
-        for d in DETECTORS:
+        for d in STORED_DETECTORS:
             tag = f"{d}_{sk}"
             if f"stored_ladder_{r}_tail_check_mtbfa_h_{tag}" in metrics:
                 checked_h.append(metrics[f"stored_ladder_{r}_tail_check_mtbfa_h_{tag}"])
@@ -541,7 +542,7 @@ def found_within_2s(rows: pd.DataFrame, faults) -> str:
     fault detects within 2 s on at least half of their records, with those detectors; "none"."""
     found, label = [], {f.name: fault_short_label(f) for f in faults}
     for fault, group in rows.groupby("fault", sort=False):
-        who = [DETECTOR_SHORT[d] for d in DETECTORS if d != "oracle"
+        who = [DETECTOR_SHORT[d] for d in STORED_DETECTORS if d != "oracle"
                and (group.loc[group["detector"] == d, "detected_within_2s"] >= 0.5).any()]
         if who:
             found.append(f"{label.get(fault, fault)} ({', '.join(who)})")
@@ -553,12 +554,14 @@ RUNG_WORDS = {"ideal": "ideal rung", "track_unknown": "track-unknown rung",
               "model_error": "model-error rung"}
 
 
-def rung_table(m: dict, faults, settings: Settings, rungs: list[str], prefix: str) -> str:
-    """The table of :func:`ladder_table` for ``rungs`` from metrics ``<prefix><rung>_…``."""
+def rung_table(m: dict, faults, settings: Settings, rungs: list[str], prefix: str,
+               detectors: dict = DETECTORS) -> str:
+    """The table of :func:`ladder_table` for ``rungs`` and ``detectors`` from metrics
+    ``<prefix><rung>_…``."""
     sk = speed_key(settings.ladder_speed_kmh)
     rows = []
     for f in faults:
-        for i, det in enumerate(DETECTORS):
+        for i, det in enumerate(detectors):
             row = [f.label if i == 0 else "", DETECTOR_SHORT[det]]
             tag = f"{det}_{f.name}_{sk}_at_{LADDER_MTBFA_H:g}h"
             for rung in rungs:
