@@ -660,7 +660,8 @@ def statistic_from_peaks(text: str, length: int) -> np.ndarray:
     return out
 
 
-__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median", "delay_curve_rows",
-           "evidence", "false_alarm_tail", "isolation_metrics", "long_running_check",
-           "operating_point_metrics", "paired_comparisons", "paired_metrics", "poisson_check",
-           "statistic_from_peaks", "statistic_peaks", "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]
+__all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median",
+           "delay_curve_rows", "evidence", "false_alarm_tail", "isolation_metrics",
+           "long_running_check", "operating_point_metrics", "paired_comparisons",
+           "paired_metrics", "poisson_check", "statistic_from_peaks", "statistic_peaks",
+           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

@@ -54,10 +54,10 @@ from railpaper.experiments.suspension_fault_detection.spec import (
     DETECTORS,
     LADDER,
     LADDER_MTBFA_H,
+    RUN_TRACK_UNKNOWN_RECORDS,
     RUNGS_WITHOUT_TRACK,
     STORED_DETECTORS,
     STORED_RUNGS,
-    TRACK_UNKNOWN_FAULT_SHARE,
     Settings,
 )
 from railpaper.experiments.track_shaping import shaping_filter
@@ -263,8 +263,10 @@ def _ladder_items(settings: Settings, chosen: list[Fault]) -> list[tuple[str, st
 
 def track_unknown_fault_records(settings: Settings) -> int:
     """Fault records per fault on the rungs whose filters estimate the track: the first
-    :data:`TRACK_UNKNOWN_FAULT_SHARE` of the ladder's, at least two."""
-    return max(2, int(TRACK_UNKNOWN_FAULT_SHARE * settings.ladder_records_per_fault))
+    :data:`RUN_TRACK_UNKNOWN_RECORDS` of the ladder's (0: those rungs are left out of the
+    run)."""
+    n = min(RUN_TRACK_UNKNOWN_RECORDS, settings.ladder_records_per_fault)
+    return n if n >= 2 else 0
 
 
 def _kept(metrics: dict, prefix: str) -> dict:
@@ -336,8 +338,9 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
     at the ideal rung's thresholds for :data:`LADDER_MTBFA_H` hours (``…_ideal_thresholds_``):
     what a monitor tuned on the ideal sensors does with the worse ones.  The rungs whose
     filters estimate the track (:data:`RUNGS_WITHOUT_TRACK`) run the first
-    :data:`TRACK_UNKNOWN_FAULT_SHARE` of each fault's records (at least two) and all the
-    fault-free ones.  Metrics
+    :data:`RUN_TRACK_UNKNOWN_RECORDS` of each fault's records and all the fault-free ones, or
+    not at all below two (the default: the stored evidence holds them,
+    :data:`STORED_LADDER`).  Metrics
     ``ladder_<rung>_<metric>`` (:data:`LADDER_KEPT`) and one row per (rung, detector, fault)."""
     if settings.ladder_records_per_fault < 2 or settings.ladder_fault_free_records < 4:
         return {}, pd.DataFrame()
@@ -348,6 +351,8 @@ def ladder(settings: Settings, fault_settings: dict, fixed: dict, theta: np.ndar
     rungs = {"ideal": [r for r in ideal if r.speed_kmh == speed
                        and (r.fault, r.role, r.seed) in wanted]}
     for n, (rung, (_, overrides)) in enumerate(LADDER.items()):
+        if rung in RUNGS_WITHOUT_TRACK and not track_unknown_fault_records(settings):
+            continue                           # left out of the run (the stored evidence)
         worse = settings.replace(**overrides)
         track = track_model(worse, fixed, speed) if rung in RUNGS_WITHOUT_TRACK else None
         rungs[rung] = []

@@ -291,8 +291,11 @@ def ladder_figure(result, settings: Settings):
     hours between false alarms (recalibrated on each rung): per fault (columns), each
     detector's Kaplan–Meier median delay (top, log; missing where fewer than half the records
     are detected) and its share detected within 2 s (bottom; dotted: at the ideal rung's
-    thresholds) on each rung (x)."""
-    return rung_figure(result.ladder, list(result.faults), ["ideal"] + list(LADDER), settings,
+    thresholds) on each rung (x; a rung the run left out is not drawn)."""
+    table = result.ladder
+    ran = set(table["rung"]) if table is not None and len(table) else set()
+    rungs = [r for r in ["ideal"] + list(LADDER) if r == "ideal" or r in ran]
+    return rung_figure(result.ladder, list(result.faults), rungs, settings,
                        f"{settings.ladder_speed_kmh:g} km/h, thresholds for {LADDER_MTBFA_H:g} h "
                        "between false alarms on each rung")
 

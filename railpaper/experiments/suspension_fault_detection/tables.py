@@ -409,9 +409,12 @@ def ladder_table(result, settings: Settings) -> str:
     between false alarms recalibrated on each rung: one row per fault and detector, one column
     per rung: the Kaplan–Meier median delay with its 95 % interval (s; "not reached" where fewer
     than half the records are detected), the share detected within 2 s, and in brackets the
-    share within 2 s at the ideal rung's thresholds; "—" where the ladder did not run."""
-    return rung_table(result.metrics, result.faults, settings, ["ideal"] + list(LADDER),
-                      "ladder_")
+    share within 2 s at the ideal rung's thresholds; "—" where the ladder did not run; a rung
+    the run left out has no column."""
+    m = result.metrics
+    rungs = [r for r in ["ideal"] + list(LADDER)
+             if r == "ideal" or any(k.startswith(f"ladder_{r}_") for k in m)]
+    return rung_table(m, result.faults, settings, rungs, "ladder_")
 
 
 def stored_ladder_table(metrics: dict, faults, settings: Settings) -> str:
@@ -457,7 +460,8 @@ def stored_ladder_facts(metrics: dict, table: pd.DataFrame | None, faults, summa
            "me_critical": kmh(summary["critical_speed_kmh"]),
            "me_critical_half": kmh(summary["critical_speed_csaly_half_kmh"]),
            "me_critical_stiffness": ", ".join(
-               f"{kmh(v)} km/h at {float(k.rsplit('_x', 1)[1]) * summary['series_stiffness_N_per_m'] / 1e6:g} MN/m"
+               f"{kmh(v)} km/h at "
+               f"{float(k.rsplit('_x', 1)[1]) * summary['series_stiffness_N_per_m'] / 1e6:g} MN/m"
                for k, v in summary.items() if k.startswith("critical_speed_kmh_stiffness_x")),
            "me_critical_pure": kmh(summary["critical_speed_kmh_pure_damper"]),
            "stored_cpu_min": f"{provenance.get('cpu_s', 0.0) / 60:.2g}"}
