@@ -83,6 +83,11 @@ def window_rows(dt_s: float, monitor_from_s: float) -> int:
     return max(int(round(monitor_from_s / dt_s)) - 1, 0)
 
 
+def rows_per_block(settings: Settings, dt_s: float) -> int:
+    """Samples in one ``false_alarm_block_s`` block of the false-alarm tail (at least one)."""
+    return max(1, int(round(settings.false_alarm_block_s / dt_s)))
+
+
 def window_max(statistic: np.ndarray, first_row: int) -> float:
     """Largest statistic in the monitoring window (−inf when the record ends before it)."""
     tail = statistic[first_row:]
@@ -486,7 +491,7 @@ def evidence(records: list[RecordRun], detectors: list[str], speeds: tuple[float
     there; the fourth value returned is the delay against mean time between false alarms
     table (:func:`delay_curve_rows`)."""
     first_row = window_rows(dt_s, monitor_from_s)
-    block_rows = max(1, int(round(settings.false_alarm_block_s / dt_s)))
+    block_rows = rows_per_block(settings, dt_s)
     metrics, thresholds, roc, curve = {}, {}, [], []
     for speed in speeds:
         at = [r for r in records if r.speed_kmh == speed]
@@ -663,5 +668,5 @@ def statistic_from_peaks(text: str, length: int) -> np.ndarray:
 __all__ = ["BLAMING", "TAIL_RESAMPLES", "blame_metrics", "censored_median",
            "delay_curve_rows", "evidence", "false_alarm_tail", "isolation_metrics",
            "long_running_check", "operating_point_metrics", "paired_comparisons",
-           "paired_metrics", "poisson_check", "statistic_from_peaks", "statistic_peaks",
-           "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]
+           "paired_metrics", "poisson_check", "rows_per_block", "statistic_from_peaks",
+           "statistic_peaks", "tail_check", "tail_intervals", "threshold", "watched_h", "window_rows"]

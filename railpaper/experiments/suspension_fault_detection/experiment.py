@@ -38,6 +38,7 @@ from railpaper.experiments.suspension_fault_detection.evidence import (
     false_alarm_metrics,
     fault_metrics,
     flange_metrics,
+    rows_per_block,
     statistic_from_peaks,
     statistic_peaks,
     window_rows,
@@ -457,7 +458,7 @@ def monitored_s(settings: Settings) -> float:
     ``false_alarm_block_s`` blocks of its monitoring window (from the prior's first fault time)."""
     _, fault_settings = faults.catalogue()
     first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
-    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    block_rows = rows_per_block(settings, settings.dt_s)
     steps = int(round(settings.duration_s / settings.dt_s))
     return (steps - first_row) // block_rows * block_rows * settings.dt_s
 
@@ -489,7 +490,7 @@ def running_rows(settings: Settings, seeds) -> pd.DataFrame:
     _, values = detectors.oracle_hypotheses(chosen, theta)
     bank = detectors.bank_hypotheses(theta, faults.bayes_factors())
     first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
-    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    block_rows = rows_per_block(settings, settings.dt_s)
     blocks = (int(round(settings.duration_s / settings.dt_s)) - first_row) // block_rows
     rows = []
     with one_thread():
@@ -550,19 +551,21 @@ def stored_ladder_rows(settings: Settings, records_) -> pd.DataFrame:
     _, values = detectors.oracle_hypotheses(list(chosen.values()), theta)
     bank = detectors.bank_hypotheses(theta, faults.bayes_factors())
     first_row = evidence_window_row(settings, faults.fault_times_s(fault_settings))
-    block_rows = max(1, int(round(settings.false_alarm_block_s / settings.dt_s)))
+    block_rows = rows_per_block(settings, settings.dt_s)
     speed = settings.ladder_speed_kmh
     truth_error = faults.model_error()
+    rungs = {}                      # per rung: its settings, track model and truth's error
+    for rung, (_, overrides, with_error) in STORED_RUNGS.items():
+        worse = settings.replace(**overrides)
+        rungs[rung] = (worse, track_model(worse, fixed, speed),
+                       truth_error if with_error else None)
     rows = []
     with one_thread():
         for record in records_:
             rung, key, role, record_seed = stored_ladder_item(settings, record)
-            _, overrides, with_error = STORED_RUNGS[rung]
-            worse = settings.replace(**overrides)
+            worse, track, error = rungs[rung]
             run_, _ = run_record(worse, fault_settings, fixed, theta, chosen.get(key), role,
-                                 speed, record_seed, values, bank,
-                                 track_model(worse, fixed, speed),
-                                 truth_error if with_error else None)
+                                 speed, record_seed, values, bank, track, error)
             row = {"seed": int(record), "rung": rung, "record": key,
                    "record_seed": record_seed, "fault_time_s": run_.fault_time_s,
                    "end_s": run_.end_s, "flange_contact": bool(run_.flange_contact)}
